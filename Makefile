@@ -1,0 +1,51 @@
+# Two commands do all set-up on a fresh machine with Python 3.11:
+#   make demo   - the main job
+#   make test   - the test suite
+# Both bootstrap .venv/ (pinned versions in requirements/pins.txt) and re-run fast when nothing
+# changed. With a system ROS 2 (rclpy importable by $(PYTHON)) the venv sees the system packages
+# and no ROS wheels are installed, so the system install is never shadowed.
+SHELL := /bin/bash
+PYTHON ?= python3
+VENV := .venv
+PY := $(VENV)/bin/python
+STAMP := $(VENV)/.bootstrapped
+PIP := $(PY) -m pip install --disable-pip-version-check -q -c requirements/pins.txt
+
+# Every rclpy process: discovery on loopback only, a per-run domain, logs in a temp dir.
+export ROS_AUTOMATIC_DISCOVERY_RANGE := LOCALHOST
+export ROS_DOMAIN_ID ?= $(shell echo $$(( $$$$ % 100 + 100 )))
+export ROS_LOG_DIR ?= $(shell mktemp -d /tmp/daddy-roslog.XXXXXX)
+export ROS_PYTHON_CHECK_FIELDS := 1
+
+.PHONY: demo test test-slow bench venv clean
+
+venv: $(STAMP)
+
+$(STAMP): requirements/pins.txt requirements/core.txt requirements/ros.txt setup.py setup.cfg package.xml
+	@set -e; \
+	if $(PYTHON) -c "import rclpy" >/dev/null 2>&1; then \
+	  echo "bootstrap: system rclpy found, venv with system site-packages"; \
+	  [ -x $(PY) ] || $(PYTHON) -m venv --system-site-packages $(VENV); \
+	  $(PIP) -r requirements/core.txt; \
+	else \
+	  echo "bootstrap: no system rclpy, installing the pinned ROS 2 Jazzy wheels"; \
+	  [ -x $(PY) ] || $(PYTHON) -m venv $(VENV); \
+	  $(PIP) -r requirements/core.txt -r requirements/ros.txt; \
+	fi; \
+	$(PY) -m pip install --disable-pip-version-check -q --no-deps -e .; \
+	touch $@
+
+demo: $(STAMP)
+	$(VENV)/bin/daddy solve double_integrator --method dyn
+
+test: $(STAMP)
+	$(PY) -m pytest -q test
+
+test-slow: $(STAMP)
+	$(PY) -m pytest -q -m slow test --run-slow
+
+bench: $(STAMP)
+	$(PY) bench/bench_da.py
+
+clean:
+	rm -rf $(VENV) build install log *.egg-info

@@ -1,0 +1,138 @@
+"""Polynomial maps: evaluation at displaced points, composition, and convergence radius.
+
+A "map" is a DA of shape ``(m, *batch)``: m output components, each a polynomial in the DA's n
+variables, for a batch of expansion points (e.g. one flow map per trajectory stage).
+"""
+from __future__ import annotations
+
+import numpy as np
+
+from ..errors import DaddyError
+from .core import DA, _align, _mul
+from .monomials import MonomialTables
+
+
+def monomial_values(dv: np.ndarray, T: MonomialTables) -> np.ndarray:
+    """Values of all monomials at displacements ``dv``.
+
+    Args:
+        dv: (n, *batch) displacement of each variable from the expansion point.
+    Returns:
+        (M, *batch) monomial values (the constant monomial is 1).
+    """
+    dv = np.asarray(dv, dtype=float)
+    if dv.shape[:1] != (T.n,):
+        raise DaddyError(f"displacement must have leading axis n={T.n}, got shape {dv.shape}")
+    mv = np.empty((T.size,) + dv.shape[1:])
+    mv[0] = 1.0
+    mv[1:T.n + 1] = dv
+    if T.k >= 2:
+        b = T.block[2]
+        np.multiply(dv[T.triu_i], dv[T.triu_j], out=mv[b])
+    for d in range(3, T.k + 1):
+        b = T.block[d]
+        np.multiply(mv[T.parent[b]], dv[T.parent_var[b]], out=mv[b])
+    return mv
+
+
+def evaluate(p: DA, dv) -> np.ndarray:
+    """Evaluate the polynomial(s) at displacement(s) ``dv`` from their expansion point.
+
+    Args:
+        p: DA of shape (m, *batch) (or any shape).
+        dv: (n,) one displacement for all, or (n, *batch) one per batch element.
+    Returns:
+        array of shape ``p.shape`` (broadcast with the batch of ``dv``).
+    """
+    mv = monomial_values(dv, p.T)
+    if mv.ndim == 1:
+        # one point for every polynomial: a matrix-vector product
+        return np.tensordot(mv, p.c, axes=(0, 0))
+    c, m = p.c, mv
+    # align mv's batch with the trailing axes of p's shape
+    m = m.reshape(m.shape[:1] + (1,) * (c.ndim - m.ndim) + m.shape[1:]) if c.ndim > m.ndim else m
+    return np.einsum("m...,m...->...", c, m) if c.shape == m.shape else (c * m).sum(axis=0)
+
+
+def compose(p: DA, g: DA) -> DA:
+    """Plug the map ``g`` into ``p``: returns the DA of p(g - g.cons ... ) i.e. P_p(g(dy)).
+
+    ``p``'s n variables are displacements; ``g`` (shape (n, *batch)) gives each displacement as a
+    polynomial in ``g``'s variables. The constant part of ``g`` is the displacement at which ``p``
+    is evaluated, so ``compose(p, shift + identity)`` re-centres ``p`` at ``shift``.
+
+    Args:
+        p: DA of shape (*sp) in n variables.
+        g: DA of shape (n, *sg) in any number of variables.
+    Returns:
+        DA of shape broadcast(sp, sg) in ``g``'s variables.
+    """
+    T, G = p.T, g.T
+    if g.shape[:1] != (T.n,):
+        raise DaddyError(f"compose: inner map must have {T.n} components, got shape {g.shape}")
+    # monomials of g as DA: mono[m] = mono[parent[m]] * g[parent_var[m]]
+    mono = np.empty((G.size, T.size) + g.shape[1:])
+    mono[:, 0] = 0.0
+    mono[0, 0] = 1.0
+    mono[:, 1:T.n + 1] = g.c
+    for d in range(2, T.k + 1):
+        b = T.block[d]
+        mono[:, b] = _mul(mono[:, T.parent[b]], g.c[:, T.parent_var[b]], G)
+    # out[q, *s] = sum_m p[m, *sp] * mono[q, m, *sg]
+    pc = p.c
+    sp, sg = pc.shape[1:], g.shape[1:]
+    shape = np.broadcast_shapes(sp, sg)
+    pc = pc.reshape((T.size,) + (1,) * (len(shape) - len(sp)) + sp)
+    mono = mono.reshape(mono.shape[:2] + (1,) * (len(shape) - len(sg)) + sg)
+    out = np.einsum("m...,qm...->q...", np.broadcast_to(pc, (T.size,) + shape),
+                    np.broadcast_to(mono, mono.shape[:2] + shape), optimize=False)
+    return DA(out, G)
+
+
+def shift(p: DA, dv) -> DA:
+    """Re-centre ``p`` at displacement ``dv`` (shape (n,) or (n, *batch)): p(dv + dx)."""
+    from .core import variables
+    dv = np.asarray(dv, dtype=float)
+    g = variables(dv, order=p.order, n=p.n)
+    return compose(p, g)
+
+
+def radius(p: DA, eps: float, axis: int | None = 0) -> np.ndarray:
+    """Convergence-radius estimate of the polynomial(s) at accuracy ``eps``.
+
+    Rule: with a_i the sum of |coefficients| of order i, fit log a_i = alpha + beta * i over the
+    orders 1..k by least squares, extrapolate the first neglected order a_{k+1}, and return
+    r = (eps / a_{k+1}) ** (1 / (k + 1)). At order 2 the fit passes through both points and this
+    is exactly r = (eps * a1 / a2**2) ** (1/3). A component without order-1 or without order-2
+    (top two orders at k > 2) terms is treated as exact: r = +inf.
+
+    Args:
+        p: DA of shape (m, *batch).
+        eps: accuracy (same units as the polynomial's values).
+        axis: component axis of ``p.shape`` to take the minimum over (None: per component).
+    Returns:
+        radius per batch element (or per component when ``axis`` is None).
+    """
+    T = p.T
+    if T.k < 2:
+        raise DaddyError("radius() needs order >= 2")
+    a = np.stack([np.abs(p.c[T.block[d]]).sum(axis=0) for d in range(1, T.k + 1)])  # (k, *shape)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        if T.k == 2:
+            r = np.cbrt(eps * a[0] / (a[1] * a[1]))
+        else:
+            orders = np.arange(1, T.k + 1, dtype=float)
+            la = np.log(a)
+            om = orders.mean()
+            w = (orders - om).reshape((-1,) + (1,) * (a.ndim - 1))
+            beta = (w * (la - la.mean(axis=0))).sum(axis=0) / (w * w).sum()
+            alpha = la.mean(axis=0) - beta * om
+            r = (eps / np.exp(alpha + beta * (T.k + 1))) ** (1.0 / (T.k + 1))
+        exact = (a[0] == 0) | (a[-1] == 0)
+        r = np.where(exact | ~np.isfinite(r), np.inf, r)
+    if axis is None:
+        return r
+    return r.min(axis=axis)
+
+
+__all__ = ["monomial_values", "evaluate", "compose", "shift", "radius", "_align"]

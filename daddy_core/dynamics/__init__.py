@@ -1,0 +1,13 @@
+"""Dynamical models (written once for floats and DA) and their normalisation units."""
+from .models import (THRUST_FLOOR, cr3bp, double_integrator_step, equinoctial,
+                     equinoctial_to_cartesian, keplerian_to_equinoctial, thrust_magnitude,
+                     two_body)
+from .units import (SYSTEM_UNITS, Spacecraft, Units, earth_moon_units, earth_units, sun_units,
+                    unit_units)
+
+__all__ = [
+    "THRUST_FLOOR", "cr3bp", "double_integrator_step", "equinoctial", "equinoctial_to_cartesian",
+    "keplerian_to_equinoctial", "thrust_magnitude", "two_body",
+    "SYSTEM_UNITS", "Spacecraft", "Units", "earth_moon_units", "earth_units", "sun_units",
+    "unit_units",
+]

@@ -1,0 +1,138 @@
+"""Equations of motion from the paper, written once for floats, numpy arrays and DA.
+
+Every right-hand side has the signature ``rhs(t, x, u) -> dx/dt`` (a closure over its constants,
+built by the factory functions below), with ``x`` of shape (7, *batch) = [r (3), v (3), m] (or
+equinoctial elements + mass) and ``u`` of shape (3, *batch) the thrust in normalised force units.
+Accelerations are thrust / mass; the mass rate is -|u| / c with c = g0 Isp in normalised units.
+
+|u| is computed as sqrt(u.u + THRUST_FLOOR^2): the mass flow is not differentiable at zero thrust,
+and the floor (1e-12 force units, i.e. ~1e-12 N-scale) keeps every expansion finite at u = 0 at a
+propellant cost below 1e-9 kg over any catalogue transfer.
+"""
+from __future__ import annotations
+
+import numpy as np
+
+from ..da import functions as dm
+
+THRUST_FLOOR = 1e-12
+
+
+def thrust_magnitude(u):
+    """Regularised thrust norm sqrt(|u|^2 + THRUST_FLOOR^2), shape (*batch)."""
+    return dm.sqrt(u[0] * u[0] + u[1] * u[1] + u[2] * u[2] + THRUST_FLOOR ** 2)
+
+
+def double_integrator_step(dt: float = 1.0):
+    """Discrete double integrator (paper eq. 17), the explicit-Euler map used by the reference.
+
+    x = [r (3), v (3)], u = acceleration (3); r+ = r + v dt, v+ = v + u dt.
+    Returns f(x, u) -> x+ (a discrete stage map, not a right-hand side).
+    """
+    def step(x, u):
+        return dm.stack([x[0] + x[3] * dt, x[1] + x[4] * dt, x[2] + x[5] * dt,
+                         x[3] + u[0] * dt, x[4] + u[1] * dt, x[5] + u[2] * dt])
+    return step
+
+
+def two_body(gm: float, exhaust_speed: float):
+    """Sun-centred two-body problem with mass (paper eq. 18), Cartesian, normalised."""
+    def rhs(t, x, u):
+        rx, ry, rz, m = x[0], x[1], x[2], x[6]
+        r2 = rx * rx + ry * ry + rz * rz
+        k = r2 ** -1.5 * gm
+        inv_m = 1.0 / m
+        return dm.stack([
+            x[3], x[4], x[5],
+            u[0] * inv_m - rx * k,
+            u[1] * inv_m - ry * k,
+            u[2] * inv_m - rz * k,
+            thrust_magnitude(u) * (-1.0 / exhaust_speed),
+        ])
+    return rhs
+
+
+def cr3bp(mu: float, exhaust_speed: float):
+    """Earth-Moon circular restricted three-body problem with mass (paper eq. 19).
+
+    Rotating barycentric frame; primaries at (-mu, 0, 0) and (1 - mu, 0, 0).
+    """
+    def rhs(t, x, u):
+        px, py, pz, vx, vy, vz, m = x[0], x[1], x[2], x[3], x[4], x[5], x[6]
+        yz2 = py * py + pz * pz
+        d1 = px + mu
+        d2 = px - (1.0 - mu)
+        k1 = (d1 * d1 + yz2) ** -1.5 * (1.0 - mu)
+        k2 = (d2 * d2 + yz2) ** -1.5 * mu
+        inv_m = 1.0 / m
+        ksum = k1 + k2
+        return dm.stack([
+            vx, vy, vz,
+            vy * 2.0 + px - d1 * k1 - d2 * k2 + u[0] * inv_m,
+            vx * -2.0 + py - py * ksum + u[1] * inv_m,
+            -(pz * ksum) + u[2] * inv_m,
+            thrust_magnitude(u) * (-1.0 / exhaust_speed),
+        ])
+    return rhs
+
+
+def equinoctial(gm: float, exhaust_speed: float):
+    """Earth-centred Gauss equations in equinoctial elements with mass (paper eqs. 20-21).
+
+    x = [a, p, q, r, s, L, m] with p = e sin(Om + om), q = e cos(Om + om), r = tan(i/2) sin Om,
+    s = tan(i/2) cos Om; u = thrust in the radial / transverse / normal frame.
+
+    The paper's printed eq. 20 is garbled in two places; this follows the standard form it
+    derives from: dL/dt = sqrt(mu / a^3) Psi^2 / B^3 - sqrt(a / mu) B / Psi (r cos L - s sin L) f_N
+    (the paper prints sqrt(mu / a) and sqrt(a^3 / mu), which are not dimensionally consistent).
+    """
+    def rhs(t, x, u):
+        a, p, q, r, s, L, m = x[0], x[1], x[2], x[3], x[4], x[5], x[6]
+        inv_m = 1.0 / m
+        fr, ft, fn = u[0] * inv_m, u[1] * inv_m, u[2] * inv_m
+        sL, cL = dm.sin(L), dm.cos(L)
+        B = dm.sqrt(1.0 - p * p - q * q)
+        psi = 1.0 + p * sL + q * cL
+        inv_psi = 1.0 / psi
+        sam = dm.sqrt(a * (1.0 / gm))  # sqrt(a / mu)
+        rc = r * cL - s * sL
+        g = 1.0 + r * r + s * s
+        da_ = a * sam * 2.0 / B * ((q * sL - p * cL) * fr + psi * ft)
+        dp = B * sam * (-cL * fr + ((p + sL) * inv_psi + sL) * ft - q * rc * inv_psi * fn)
+        dq = B * sam * (sL * fr + ((q + cL) * inv_psi + cL) * ft + p * rc * inv_psi * fn)
+        dr = B * sam * g * sL * inv_psi * fn * 0.5
+        ds = B * sam * g * cL * inv_psi * fn * 0.5
+        dL = psi * psi / (B * B * B * a * sam) - B * sam * inv_psi * rc * fn
+        return dm.stack([da_, dp, dq, dr, ds, dL, thrust_magnitude(u) * (-1.0 / exhaust_speed)])
+    return rhs
+
+
+def keplerian_to_equinoctial(a, e, i_rad, raan_rad, argp_rad, nu_rad):
+    """Keplerian elements -> [a, p, q, r, s, L] (paper eq. 21), true longitude L."""
+    lp = raan_rad + argp_rad
+    t = np.tan(i_rad / 2.0)
+    return np.array([a, e * np.sin(lp), e * np.cos(lp), t * np.sin(raan_rad),
+                     t * np.cos(raan_rad), lp + nu_rad])
+
+
+def equinoctial_to_cartesian(x, gm: float = 1.0):
+    """[a, p, q, r, s, L] -> position and velocity (6,), for plotting and checks."""
+    a, p, q, r, s, L = x[:6]
+    e2 = p * p + q * q
+    sl = a * (1.0 - e2)
+    w = 1.0 + q * np.cos(L) + p * np.sin(L)
+    rad = sl / w
+    s2 = 1.0 + r * r + s * s
+    # Walker et al. modified equinoctial convention with h = s (cos), k = r (sin), f = q, g = p
+    h, k = s, r
+    alpha2 = h * h - k * k
+    cL, sL = np.cos(L), np.sin(L)
+    pos = rad / s2 * np.array([cL + alpha2 * cL + 2 * h * k * sL,
+                               sL - alpha2 * sL + 2 * h * k * cL,
+                               2 * (h * sL - k * cL)])
+    f, g = q, p
+    c = np.sqrt(gm / sl) / s2
+    vel = -c * np.array([sL + alpha2 * sL - 2 * h * k * cL + g - 2 * f * h * k + alpha2 * g,
+                         -cL + alpha2 * cL + 2 * h * k * sL - f + 2 * g * h * k + alpha2 * f,
+                         -2 * (h * cL + k * sL + f * h + g * k)])
+    return np.concatenate([pos, vel])

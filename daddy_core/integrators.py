@@ -1,0 +1,148 @@
+"""Explicit Runge-Kutta integrators, generic over floats, numpy arrays and DA.
+
+The right-hand side has the signature ``rhs(t, x, u) -> dx/dt`` with ``x`` of shape (nx, *batch)
+and ``u`` (nu, *batch) held constant over the integration (piecewise-constant control). Time ``t``
+and step ``h`` may be scalars or arrays of the batch shape, so B stages of different length
+integrate in one call.
+
+* ``rk4``: classical fixed-step RK4.
+* ``rk78``: Runge-Kutta-Fehlberg 7(8) (Fehlberg 1968, NASA TR R-287) with adaptive steps, each
+  batch element on its own step sequence; the error estimate and the step choice use only the
+  constant part of a DA state, so the expansion follows the same steps as the float trajectory.
+"""
+from __future__ import annotations
+
+from fractions import Fraction as F
+
+import numpy as np
+
+from .da import functions as dm
+from .errors import DaddyError
+
+# ---------------------------------------------------------------------------------- RKF7(8)
+_C = [F(0), F(2, 27), F(1, 9), F(1, 6), F(5, 12), F(1, 2), F(5, 6), F(1, 6), F(2, 3), F(1, 3),
+      F(1), F(0), F(1)]
+_A = [
+    [],
+    [F(2, 27)],
+    [F(1, 36), F(1, 12)],
+    [F(1, 24), 0, F(1, 8)],
+    [F(5, 12), 0, F(-25, 16), F(25, 16)],
+    [F(1, 20), 0, 0, F(1, 4), F(1, 5)],
+    [F(-25, 108), 0, 0, F(125, 108), F(-65, 27), F(125, 54)],
+    [F(31, 300), 0, 0, 0, F(61, 225), F(-2, 9), F(13, 900)],
+    [F(2), 0, 0, F(-53, 6), F(704, 45), F(-107, 9), F(67, 90), F(3)],
+    [F(-91, 108), 0, 0, F(23, 108), F(-976, 135), F(311, 54), F(-19, 60), F(17, 6), F(-1, 12)],
+    [F(2383, 4100), 0, 0, F(-341, 164), F(4496, 1025), F(-301, 82), F(2133, 4100), F(45, 82),
+     F(45, 164), F(18, 41)],
+    [F(3, 205), 0, 0, 0, 0, F(-6, 41), F(-3, 205), F(-3, 41), F(3, 41), F(6, 41), 0],
+    [F(-1777, 4100), 0, 0, F(-341, 164), F(4496, 1025), F(-289, 82), F(2193, 4100), F(51, 82),
+     F(33, 164), F(12, 41), 0, F(1)],
+]
+_B8 = [0, 0, 0, 0, 0, F(34, 105), F(9, 35), F(9, 35), F(9, 280), F(9, 280), 0, F(41, 840),
+       F(41, 840)]
+RK78_C = np.array([float(c) for c in _C])
+RK78_A = [[float(a) for a in row] for row in _A]
+RK78_B = np.array([float(b) for b in _B8])
+RK78_ERR = float(F(41, 840))  # error = 41/840 (k1 + k11 - k12 - k13) h
+
+
+def _axpy(x, h, coeffs, ks):
+    """x + h * sum_i coeffs[i] * ks[i], skipping zero coefficients."""
+    acc = None
+    for a, k in zip(coeffs, ks):
+        if a != 0.0:
+            acc = k * a if acc is None else acc + k * a
+    return x if acc is None else x + acc * h
+
+
+def rk4(rhs, x, u, t0, dt, steps: int = 20):
+    """Integrate ``rhs`` over ``dt`` with ``steps`` fixed RK4 steps.
+
+    Args:
+        rhs: rhs(t, x, u) -> dx/dt.
+        x: (nx, *batch) initial state (array or DA).
+        u: (nu, *batch) control, constant over the interval.
+        t0: start time (scalar or batch array).
+        dt: interval length (scalar or batch array), normalised time units.
+        steps: number of RK4 steps.
+    Returns:
+        state at t0 + dt, same type and shape as ``x``.
+    """
+    if steps < 1:
+        raise DaddyError(f"rk4 steps must be >= 1, got {steps}")
+    h = np.asarray(dt, dtype=float) / steps
+    t = np.asarray(t0, dtype=float)
+    for _ in range(steps):
+        k1 = rhs(t, x, u)
+        k2 = rhs(t + h / 2, x + k1 * (h / 2), u)
+        k3 = rhs(t + h / 2, x + k2 * (h / 2), u)
+        k4 = rhs(t + h, x + k3 * h, u)
+        x = x + (k1 + (k2 + k3) * 2.0 + k4) * (h / 6)
+        t = t + h
+    return x
+
+
+def rk78(rhs, x, u, t0, dt, tol: float = 1e-13, h0=None, max_steps: int = 10_000,
+         stats: dict | None = None):
+    """Integrate ``rhs`` over ``dt`` with adaptive Runge-Kutta-Fehlberg 7(8).
+
+    Each batch element keeps its own step size; the loop runs until every element has reached
+    its final time (finished elements take zero-length steps). The local error is the 7th/8th
+    order difference of the state's constant part, in the infinity norm over components, and a
+    step is accepted when it is <= ``tol`` (absolute).
+
+    Args:
+        rhs, x, u, t0: as for ``rk4``.
+        dt: interval length (scalar or batch array); may be negative.
+        tol: absolute local error tolerance.
+        h0: initial step (default dt / 8).
+        max_steps: bound on attempted steps (accepted or rejected) before raising.
+        stats: optional dict receiving ``steps`` (attempted) and ``rhs_calls``.
+    Returns:
+        state at t0 + dt, same type and shape as ``x``.
+    """
+    if not tol > 0:
+        raise DaddyError(f"rk78 tol must be > 0, got {tol}")
+    x0 = dm.cons(x)
+    batch = x0.shape[1:]
+    dt = np.broadcast_to(np.asarray(dt, dtype=float), batch).copy()
+    if not np.all(np.isfinite(dt)):
+        raise DaddyError("rk78 interval dt contains NaN or inf")
+    t = np.broadcast_to(np.asarray(t0, dtype=float), batch).copy()
+    t_end = t + dt
+    direction = np.where(dt >= 0, 1.0, -1.0)
+    h = np.abs(dt) / 8.0 if h0 is None else np.broadcast_to(np.abs(np.asarray(h0, float)), batch).copy()
+    h = np.where(h > 0, h, 1.0)
+    n_steps = 0
+    while True:
+        remaining = np.abs(t_end - t)
+        active = remaining > 1e-15 * np.maximum(1.0, np.abs(t_end))
+        if not np.any(active):
+            break
+        n_steps += 1
+        if n_steps > max_steps:
+            raise DaddyError(f"rk78 exceeded max_steps={max_steps} (stiff or singular dynamics?)")
+        hs = np.where(active, np.minimum(h, remaining), 0.0) * direction
+        ks = []
+        for i in range(13):
+            xi = _axpy(x, hs, RK78_A[i], ks)
+            ks.append(rhs(t + RK78_C[i] * hs, xi, u))
+        x_new = _axpy(x, hs, RK78_B, ks)
+        err_vec = dm.cons(ks[0] + ks[10] - ks[11] - ks[12]) * (RK78_ERR * hs)
+        err = np.max(np.abs(err_vec), axis=0) if err_vec.ndim else np.abs(err_vec)
+        if not np.all(np.isfinite(err)):
+            raise DaddyError("rk78: dynamics returned NaN or inf")
+        accept = active & (err <= tol)
+        x = dm.where(accept, x_new, x) if np.ndim(accept) else (x_new if accept else x)
+        t = np.where(accept, t + hs, t)
+        # classic step controller with safety factor 0.8 and growth bounded in [0.2, 5]
+        with np.errstate(divide="ignore"):
+            fac = 0.8 * (tol / np.maximum(err, 1e-300)) ** (1.0 / 8.0)
+        fac = np.clip(fac, 0.2, 5.0)
+        h = np.where(active, np.abs(hs) * fac, h)
+        h = np.where(h > 0, h, np.abs(dt) / 8.0 + 1e-300)
+    if stats is not None:
+        stats["steps"] = n_steps
+        stats["rhs_calls"] = 13 * n_steps
+    return x

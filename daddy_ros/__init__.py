@@ -1,0 +1,1 @@
+"""ROS 2 layer over daddy_core (rclpy guidance node)."""

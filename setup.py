@@ -1,0 +1,32 @@
+"""One ament_python package, daddy_ros, installing both Python packages:
+daddy_core (the solver, no ROS) and daddy_ros (the rclpy guidance node)."""
+from glob import glob
+
+from setuptools import find_packages, setup
+
+package_name = "daddy_ros"
+
+setup(
+    name=package_name,
+    version="0.1.0",
+    packages=find_packages(include=["daddy_core", "daddy_core.*", "daddy_ros", "daddy_ros.*"]),
+    package_data={"daddy_core.problems": ["cases/*.json"]},
+    data_files=[
+        ("share/ament_index/resource_index/packages", ["resource/" + package_name]),
+        ("share/" + package_name, ["package.xml"]),
+        ("share/" + package_name + "/config", glob("config/*.yaml")),
+        ("share/" + package_name + "/launch", glob("launch/*.py")),
+    ],
+    install_requires=["setuptools", "numpy", "scipy"],
+    zip_safe=True,
+    maintainer="daddy team",
+    maintainer_email="daddy@example.invalid",
+    description="DADDy low-thrust trajectory optimizer (daddy_core) and its ROS 2 guidance node.",
+    license="MIT",
+    python_requires=">=3.10",
+    entry_points={
+        "console_scripts": [
+            "daddy = daddy_core.cli:main",
+        ],
+    },
+)

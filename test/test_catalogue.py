@@ -1,0 +1,70 @@
+"""The catalogue loads every paper case with the paper's constants; bad case files are named."""
+import json
+
+import numpy as np
+import pytest
+
+from daddy_core.dynamics import Spacecraft
+from daddy_core.errors import DaddyError
+from daddy_core.problems import case_from_dict, list_cases, load_case
+
+EXPECTED = {  # name: (tof days, N)
+    "earth_mars": (348.79, 40), "halo_l2_l1": (20, 110), "nrho_dro": (21.2, 150),
+    "lyapunov_l1_l2": (12, 300), "dro_dro": (17.5, 100), "dro_dro_2rev": (33, 300),
+    "dro_dro_3rev": (52.75, 200), "leo_leo": (35, 5000), "meo_meo": (55, 2500),
+    "gto_geo": (95, 10000),
+}
+
+
+def test_all_cases_present_and_consistent():
+    assert set(EXPECTED) | {"double_integrator"} == set(list_cases())
+    for name, (tof_days, n) in EXPECTED.items():
+        c = load_case(name)
+        assert c.stages == n
+        assert c.units.time_s(c.tof) / 86400 == pytest.approx(tof_days)
+        assert c.x0.shape == (7,) and c.x0[6] == 1.0
+        assert c.spacecraft == Spacecraft()
+
+
+def test_paper_units():
+    em = load_case("halo_l2_l1").units
+    assert em.tu_s == pytest.approx(375189, abs=1)
+    assert em.vu_km_s == pytest.approx(1.02455, abs=1e-5)
+    assert em.gm == pytest.approx(1.21506e-2, rel=1e-5)
+    sun = load_case("earth_mars").units
+    assert sun.tu_s == pytest.approx(5022642.891, abs=1e-3)
+    assert sun.vu_km_s == pytest.approx(29.78469183, abs=1e-7)
+    # thrust: 0.5 N on 1000 kg is 5e-4 m/s^2
+    acc_si = 0.5 / 1000.0
+    acc_norm = float(sun.thrust(0.5)) / 1.0  # per unit mass
+    assert acc_norm * sun.lu_km * 1000 / sun.tu_s ** 2 == pytest.approx(acc_si)
+    leo = load_case("leo_leo")
+    assert leo.x0[0] * leo.units.lu_km == pytest.approx(6778.0)
+    assert np.degrees(2 * np.arctan(np.hypot(leo.x0[3], leo.x0[4]))) == pytest.approx(51.0)
+
+
+def test_user_case_file(tmp_path):
+    d = json.loads((load_case.__globals__["CASES_DIR"] / "dro_dro.json").read_text())
+    d["name"] = "my_dro"
+    d["stages"] = 20
+    p = tmp_path / "my_dro.json"
+    p.write_text(json.dumps(d))
+    c = load_case(p)
+    assert c.name == "my_dro" and c.stages == 20
+
+
+@pytest.mark.parametrize("field,value,msg", [
+    ("stages", 0, "stages"), ("tof_days", -1.0, "tof_days"), ("x0", [1, 2], "x0"),
+    ("x_target", [float("nan")] * 6, "x_target"), ("system", "mars", "system"),
+    ("spacecraft", {"dry_mass_kg": 2000.0}, "dry_mass_kg"),
+])
+def test_bad_case_fields_are_named(field, value, msg):
+    d = json.loads((load_case.__globals__["CASES_DIR"] / "halo_l2_l1.json").read_text())
+    d[field] = value
+    with pytest.raises(DaddyError, match=msg):
+        case_from_dict(d)
+
+
+def test_unknown_case_lists_known():
+    with pytest.raises(DaddyError, match="halo_l2_l1"):
+        load_case("no_such_case")

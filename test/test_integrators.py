@@ -1,0 +1,91 @@
+"""RK78 (and RK4) against scipy's DOP853 at rtol = atol = 1e-12 on every model."""
+import numpy as np
+import pytest
+from scipy.integrate import solve_ivp
+
+from daddy_core.dynamics import models
+from daddy_core.dynamics.units import earth_units
+from daddy_core.errors import DaddyError
+from daddy_core.integrators import rk4, rk78
+from daddy_core.problems import load_case
+
+
+def reference(rhs, x0, u, T):
+    sol = solve_ivp(lambda t, x: rhs(t, x, u), (0.0, T), x0, method="DOP853", rtol=1e-12, atol=1e-12)
+    return sol.y[:, -1]
+
+
+@pytest.mark.parametrize("name,frac", [("earth_mars", 1 / 40), ("halo_l2_l1", 1 / 110),
+                                       ("dro_dro", 1 / 100), ("leo_leo", 0.05)])
+def test_rk78_matches_dop853(name, frac):
+    case = load_case(name)
+    rhs = case.rhs()
+    T = case.tof * frac * 5  # five stages' worth
+    u = np.array([0.3, -0.2, 0.1]) * (0.5 / case.units.thrust_unit_n)  # ~0.2 N
+    x = rk78(rhs, case.x0, u, 0.0, T, tol=1e-13)
+    ref = reference(rhs, case.x0, u, T)
+    # DOP853 at rtol 1e-12 is itself accurate to ~1e-12 relative (L grows to ~150 rad in LEO)
+    assert np.max(np.abs(x - ref) / np.maximum(1.0, np.abs(ref))) < 1e-10
+    # fixed-step RK4 with 20 steps per stage is less accurate on the same span
+    x4 = rk4(rhs, case.x0, u, 0.0, T, steps=100)
+    assert np.max(np.abs(x4 - ref)) > np.max(np.abs(x - ref))
+
+
+def test_rk78_fewer_rhs_calls_than_rk4_for_same_accuracy():
+    case = load_case("halo_l2_l1")
+    rhs = case.rhs()
+    T = case.tof / 110
+    ref = reference(rhs, case.x0, np.zeros(3), T)
+    stats = {}
+    x = rk78(rhs, case.x0, np.zeros(3), 0.0, T, tol=1e-12, stats=stats)
+    err78 = np.max(np.abs(x - ref))
+    # smallest RK4 step count reaching the same accuracy
+    for steps in (5, 10, 20, 40, 80, 160, 320):
+        if np.max(np.abs(rk4(rhs, case.x0, np.zeros(3), 0.0, T, steps=steps) - ref)) <= max(err78, 1e-12):
+            break
+    assert stats["rhs_calls"] < 4 * steps
+
+
+def test_batched_rk78_with_different_stage_lengths():
+    case = load_case("earth_mars")
+    rhs = case.rhs()
+    X = np.tile(case.x0[:, None], (1, 3))
+    U = np.zeros((3, 3))
+    dts = np.array([0.05, 0.15, 0.3])
+    xb = rk78(rhs, X, U, 0.0, dts, tol=1e-13)
+    for j in range(3):
+        np.testing.assert_allclose(xb[:, j], reference(rhs, case.x0, np.zeros(3), dts[j]), atol=1e-11)
+
+
+def test_equinoctial_matches_cartesian_with_rtn_thrust():
+    units = earth_units()
+    c = 40.0
+    rhs_eq = models.equinoctial(1.0, c)
+    x0 = np.append(models.keplerian_to_equinoctial(0.6, 0.1, 0.5, 1.0, 0.3, 0.2), 1.0)
+    u_rtn = np.array([0.01, 0.02, -0.015])
+
+    def rhs_cart(t, y, u):
+        r, v, m = y[:3], y[3:6], y[6]
+        h = np.cross(r, v)
+        R = np.column_stack([r / np.linalg.norm(r), np.cross(h, r) / np.linalg.norm(np.cross(h, r)),
+                             h / np.linalg.norm(h)])
+        a = -r / np.linalg.norm(r) ** 3 + R @ u / m
+        return np.concatenate([v, a, [-np.linalg.norm(u) / c]])
+
+    T = 2.0
+    xe = rk78(rhs_eq, x0, u_rtn, 0.0, T, tol=1e-13)
+    y0 = np.append(models.equinoctial_to_cartesian(x0), 1.0)
+    yc = reference(rhs_cart, y0, u_rtn, T)
+    np.testing.assert_allclose(models.equinoctial_to_cartesian(xe), yc[:6], atol=1e-9)
+    np.testing.assert_allclose(xe[6], yc[6], atol=1e-12)
+    assert units.vu_km_s == pytest.approx(0.48890, abs=1e-5)
+
+
+def test_integrator_errors():
+    rhs = lambda t, x, u: x * np.nan
+    with pytest.raises(DaddyError, match="NaN"):
+        rk78(rhs, np.ones(2), None, 0.0, 1.0)
+    with pytest.raises(DaddyError, match="steps"):
+        rk4(rhs, np.ones(2), None, 0.0, 1.0, steps=0)
+    with pytest.raises(DaddyError, match="tol"):
+        rk78(rhs, np.ones(2), None, 0.0, 1.0, tol=0)
