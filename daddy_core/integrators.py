@@ -17,6 +17,7 @@ from fractions import Fraction as F
 import numpy as np
 
 from .da import functions as dm
+from .da.core import DA
 from .errors import DaddyError
 
 # ---------------------------------------------------------------------------------- RKF7(8)
@@ -47,13 +48,36 @@ RK78_B = np.array([float(b) for b in _B8])
 RK78_ERR = float(F(41, 840))  # error = 41/840 (k1 + k11 - k12 - k13) h
 
 
-def _axpy(x, h, coeffs, ks):
-    """x + h * sum_i coeffs[i] * ks[i], skipping zero coefficients."""
-    acc = None
-    for a, k in zip(coeffs, ks):
-        if a != 0.0:
-            acc = k * a if acc is None else acc + k * a
-    return x if acc is None else x + acc * h
+class _Stages:
+    """Stage derivatives k_i of one RK step in one buffer, so x + h * sum_j a_ij k_j is a single
+    BLAS contraction over the raw coefficient arrays (works for arrays and DA alike)."""
+
+    def __init__(self, x, n_stages: int):
+        self.is_da = isinstance(x, DA)
+        raw = x.c if self.is_da else np.asarray(x)
+        self.T = x.T if self.is_da else None
+        self.buf = np.empty((n_stages,) + raw.shape, dtype=raw.dtype)
+        self.raw = raw
+        self.count = 0
+
+    def push(self, k):
+        kr = k.c if self.is_da else np.asarray(k)
+        self.buf[self.count] = kr
+        self.count += 1
+
+    def combine(self, x_raw, h, coeffs):
+        """x + h * sum_j coeffs[j] k_j (h broadcast over the batch, the trailing axes)."""
+        m = len(coeffs)
+        if m == 0:
+            out = x_raw
+        else:
+            acc = np.tensordot(np.asarray(coeffs), self.buf[:m], axes=(0, 0))
+            out = x_raw + acc * h
+        return DA(out, self.T) if self.is_da else out
+
+
+_RK4_A = [[], [0.5], [0.0, 0.5], [0.0, 0.0, 1.0]]
+_RK4_B = [1 / 6, 1 / 3, 1 / 3, 1 / 6]
 
 
 def rk4(rhs, x, u, t0, dt, steps: int = 20):
@@ -74,11 +98,13 @@ def rk4(rhs, x, u, t0, dt, steps: int = 20):
     h = np.asarray(dt, dtype=float) / steps
     t = np.asarray(t0, dtype=float)
     for _ in range(steps):
-        k1 = rhs(t, x, u)
-        k2 = rhs(t + h / 2, x + k1 * (h / 2), u)
-        k3 = rhs(t + h / 2, x + k2 * (h / 2), u)
-        k4 = rhs(t + h, x + k3 * h, u)
-        x = x + (k1 + (k2 + k3) * 2.0 + k4) * (h / 6)
+        st = _Stages(x, 4)
+        xr = st.raw
+        st.push(rhs(t, x, u))
+        st.push(rhs(t + h / 2, st.combine(xr, h, _RK4_A[1]), u))
+        st.push(rhs(t + h / 2, st.combine(xr, h, _RK4_A[2]), u))
+        st.push(rhs(t + h, st.combine(xr, h, _RK4_A[3]), u))
+        x = st.combine(xr, h, _RK4_B)
         t = t + h
     return x
 
@@ -124,12 +150,12 @@ def rk78(rhs, x, u, t0, dt, tol: float = 1e-13, h0=None, max_steps: int = 10_000
         if n_steps > max_steps:
             raise DaddyError(f"rk78 exceeded max_steps={max_steps} (stiff or singular dynamics?)")
         hs = np.where(active, np.minimum(h, remaining), 0.0) * direction
-        ks = []
+        st = _Stages(x, 13)
         for i in range(13):
-            xi = _axpy(x, hs, RK78_A[i], ks)
-            ks.append(rhs(t + RK78_C[i] * hs, xi, u))
-        x_new = _axpy(x, hs, RK78_B, ks)
-        err_vec = dm.cons(ks[0] + ks[10] - ks[11] - ks[12]) * (RK78_ERR * hs)
+            st.push(rhs(t + RK78_C[i] * hs, st.combine(st.raw, hs, RK78_A[i]), u))
+        x_new = st.combine(st.raw, hs, RK78_B)
+        kb = st.buf[:, 0] if st.is_da else st.buf
+        err_vec = (kb[0] + kb[10] - kb[11] - kb[12]) * (RK78_ERR * hs)
         err = np.max(np.abs(err_vec), axis=0) if err_vec.ndim else np.abs(err_vec)
         if not np.all(np.isfinite(err)):
             raise DaddyError("rk78: dynamics returned NaN or inf")

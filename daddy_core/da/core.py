@@ -29,7 +29,8 @@ class DA:
     __array_priority__ = 100
 
     def __init__(self, coeffs: np.ndarray, tab: MonomialTables):
-        coeffs = np.asarray(coeffs, dtype=float)
+        if type(coeffs) is not np.ndarray or coeffs.dtype != float:
+            coeffs = np.asarray(coeffs, dtype=float)
         if coeffs.shape[:1] != (tab.size,):
             raise DaddyError(
                 f"DA coefficients must have leading axis {tab.size} (n={tab.n}, k={tab.k}), "
@@ -236,8 +237,7 @@ class DA:
         if k == 2:
             n = T.n
             d1 = self.c[1:n + 1]
-            sq = d1[T.triu_i] * d1[T.triu_j]
-            sq[T.offdiag] *= 2.0
+            sq = _outer_sym(d1, d1, T)
             out = np.empty_like(self.c)
             out[0] = derivs[0]
             np.multiply(d1, derivs[1], out=out[1:n + 1])
@@ -429,33 +429,45 @@ def _constant_like(c: np.ndarray, value: float) -> np.ndarray:
     return out
 
 
+# below this many batch elements the generic product table (3 numpy calls) beats the block kernel
+_SMALL_BATCH = 12
+
+
+def _outer_sym(a1: np.ndarray, b1: np.ndarray, T: MonomialTables) -> np.ndarray:
+    """Degree-2 coefficients of (a1 . dx)(b1 . dx) for linear parts a1, b1 of shape (n, *s)."""
+    n = T.n
+    F = np.empty((n * n + 1,) + a1.shape[1:])
+    np.multiply(a1[:, None], b1[None, :], out=F[:-1].reshape((n, n) + a1.shape[1:]))
+    F[-1] = 0.0
+    return np.add(F[T.outer_a], F[T.outer_b])
+
+
 def _mul(a: np.ndarray, b: np.ndarray, T: MonomialTables) -> np.ndarray:
     """Truncated product of two coefficient arrays (M, *sa) x (M, *sb)."""
-    a, b = _align(a, b)
+    if a.shape != b.shape:
+        a, b = _align(a, b)
+        shape = (T.size,) + np.broadcast_shapes(a.shape[1:], b.shape[1:])
+        a, b = np.broadcast_to(a, shape), np.broadcast_to(b, shape)
     n = T.n
-    if T.k == 2:
+    if T.k == 2 and a[0].size > _SMALL_BATCH:
         # Specialised order-2 kernel: constant / linear / quadratic blocks.
         a0, b0 = a[0], b[0]
-        a1, b1 = a[1:n + 1], b[1:n + 1]
-        shape = np.broadcast_shapes(a.shape[1:], b.shape[1:])
-        out = np.empty((T.size,) + shape)
+        out = np.empty(a.shape)
         np.multiply(a0, b0, out=out[0, ...])
         lin = out[1:n + 1]
-        np.multiply(a1, b0, out=lin)
-        lin += a0 * b1
+        np.multiply(a[1:n + 1], b0, out=lin)
+        lin += a0 * b[1:n + 1]
         quad = out[n + 1:]
         np.multiply(a[n + 1:], b0, out=quad)
         quad += a0 * b[n + 1:]
-        quad += a1[T.triu_i] * b1[T.triu_j]
-        off = T.offdiag
-        quad[off] += a1[T.triu_j[off]] * b1[T.triu_i[off]]
+        quad += _outer_sym(a[1:n + 1], b[1:n + 1], T)
         return out
-    if T.k == 1:
-        shape = np.broadcast_shapes(a.shape[1:], b.shape[1:])
-        out = np.empty((T.size,) + shape)
+    if T.k == 1 and a[0].size > _SMALL_BATCH:
+        out = np.empty(a.shape)
         np.multiply(a[0], b[0], out=out[0, ...])
         np.multiply(a[1:], b[0], out=out[1:])
         out[1:] += a[0] * b[1:]
         return out
+    # generic product table: fewest numpy calls, best for small batches and orders > 2
     prod = a[T.pair_i] * b[T.pair_j]
     return np.add.reduceat(prod, T.pair_starts, axis=0)

@@ -8,8 +8,11 @@ from __future__ import annotations
 import numpy as np
 
 from ..errors import DaddyError
-from .core import DA, _align, _mul
+from .core import DA, _mul
 from .monomials import MonomialTables
+
+
+_ONE = np.ones(1)
 
 
 def monomial_values(dv: np.ndarray, T: MonomialTables) -> np.ndarray:
@@ -23,6 +26,8 @@ def monomial_values(dv: np.ndarray, T: MonomialTables) -> np.ndarray:
     dv = np.asarray(dv, dtype=float)
     if dv.shape[:1] != (T.n,):
         raise DaddyError(f"displacement must have leading axis n={T.n}, got shape {dv.shape}")
+    if dv.ndim == 1 and T.k == 2:
+        return np.concatenate((_ONE, dv, np.multiply.outer(dv, dv).ravel()[T.outer_a]))
     mv = np.empty((T.size,) + dv.shape[1:])
     mv[0] = 1.0
     mv[1:T.n + 1] = dv
@@ -47,8 +52,10 @@ def evaluate(p: DA, dv) -> np.ndarray:
     mv = monomial_values(dv, p.T)
     if mv.ndim == 1:
         # one point for every polynomial: a matrix-vector product
-        return np.tensordot(mv, p.c, axes=(0, 0))
+        return (mv @ p.c.reshape(p.T.size, -1)).reshape(p.shape)
     c, m = p.c, mv
+    if c.ndim == 3 and m.ndim == 2 and c.shape[2] == m.shape[1]:
+        return np.einsum("mxb,mb->xb", c, m)  # a batch of maps, one point each
     # align mv's batch with the trailing axes of p's shape
     m = m.reshape(m.shape[:1] + (1,) * (c.ndim - m.ndim) + m.shape[1:]) if c.ndim > m.ndim else m
     return np.einsum("m...,m...->...", c, m) if c.shape == m.shape else (c * m).sum(axis=0)
@@ -135,4 +142,4 @@ def radius(p: DA, eps: float, axis: int | None = 0) -> np.ndarray:
     return r.min(axis=axis)
 
 
-__all__ = ["monomial_values", "evaluate", "compose", "shift", "radius", "_align"]
+__all__ = ["monomial_values", "evaluate", "compose", "shift", "radius"]

@@ -59,6 +59,8 @@ class MonomialTables:
     triu_j: np.ndarray
     offdiag: np.ndarray
     factorial: np.ndarray
+    outer_a: np.ndarray
+    outer_b: np.ndarray
 
 
 @functools.lru_cache(maxsize=64)
@@ -107,4 +109,7 @@ def tables(n: int, k: int) -> MonomialTables:
         parent=parent, parent_var=parent_var,
         pair_i=pair_i, pair_j=pair_j, pair_target=pair_target, pair_starts=pair_starts,
         triu_i=ti, triu_j=tj, offdiag=ti != tj, factorial=fact,
+        # rows of the flattened outer product a1 (x) b1 (n*n rows + one zero row at n*n) whose
+        # sum gives each degree-2 coefficient: (i, j) and (j, i) off the diagonal, (i, i) once.
+        outer_a=ti * n + tj, outer_b=np.where(ti != tj, tj * n + ti, n * n),
     )

@@ -38,42 +38,43 @@ def double_integrator_step(dt: float = 1.0):
 def two_body(gm: float, exhaust_speed: float):
     """Sun-centred two-body problem with mass (paper eq. 18), Cartesian, normalised."""
     def rhs(t, x, u):
-        rx, ry, rz, m = x[0], x[1], x[2], x[6]
-        r2 = rx * rx + ry * ry + rz * rz
+        r = x[0:3]
+        r2 = x[0] * x[0] + x[1] * x[1] + x[2] * x[2]
         k = r2 ** -1.5 * gm
-        inv_m = 1.0 / m
-        return dm.stack([
-            x[3], x[4], x[5],
-            u[0] * inv_m - rx * k,
-            u[1] * inv_m - ry * k,
-            u[2] * inv_m - rz * k,
-            thrust_magnitude(u) * (-1.0 / exhaust_speed),
-        ])
+        acc = u * (1.0 / x[6]) - r * k  # (3, *batch): one DA product per term for all components
+        return dm.concatenate([x[3:6], acc, thrust_magnitude(u)[None] * (-1.0 / exhaust_speed)])
     return rhs
 
 
 def cr3bp(mu: float, exhaust_speed: float):
     """Earth-Moon circular restricted three-body problem with mass (paper eq. 19).
 
-    Rotating barycentric frame; primaries at (-mu, 0, 0) and (1 - mu, 0, 0).
+    Rotating barycentric frame; primaries at (-mu, 0, 0) and (1 - mu, 0, 0). Operations are
+    written on stacked components (the two primaries, the y/z pair, the three thrust axes) so
+    that a DA evaluation costs a few large products instead of many small ones.
     """
+    primaries_gm = np.array([1.0 - mu, mu])
+    shifts = np.array([mu, mu - 1.0])
+
     def rhs(t, x, u):
-        px, py, pz, vx, vy, vz, m = x[0], x[1], x[2], x[3], x[4], x[5], x[6]
-        yz2 = py * py + pz * pz
-        d1 = px + mu
-        d2 = px - (1.0 - mu)
-        k1 = (d1 * d1 + yz2) ** -1.5 * (1.0 - mu)
-        k2 = (d2 * d2 + yz2) ** -1.5 * mu
-        inv_m = 1.0 / m
-        ksum = k1 + k2
-        return dm.stack([
-            vx, vy, vz,
-            vy * 2.0 + px - d1 * k1 - d2 * k2 + u[0] * inv_m,
-            vx * -2.0 + py - py * ksum + u[1] * inv_m,
-            -(pz * ksum) + u[2] * inv_m,
-            thrust_magnitude(u) * (-1.0 / exhaust_speed),
-        ])
+        px, py, pz = x[0], x[1], x[2]
+        d = _column(shifts, px) + px                  # (2, *batch): x + mu, x - (1 - mu)
+        yz = x[1:3]
+        yz2 = yz * yz
+        k = (d * d + (yz2[0] + yz2[1])) ** -1.5 * _column(primaries_gm, px)  # (1-mu)/r1^3, mu/r2^3
+        ksum = k[0] + k[1]
+        dk = d * k
+        thrust_acc = u * (1.0 / x[6])
+        ax = x[4] * 2.0 + px - dk[0] - dk[1] + thrust_acc[0]
+        ayz = dm.stack([x[3] * -2.0 + py, pz * 0.0]) - yz * ksum + thrust_acc[1:3]
+        return dm.concatenate([x[3:6], ax[None], ayz,
+                               thrust_magnitude(u)[None] * (-1.0 / exhaust_speed)])
     return rhs
+
+
+def _column(values: np.ndarray, like) -> np.ndarray:
+    """values (m,) shaped (m, 1, ..., 1) to broadcast against a quantity shaped like ``like``."""
+    return values.reshape((-1,) + (1,) * np.ndim(dm.cons(like)))
 
 
 def equinoctial(gm: float, exhaust_speed: float):
