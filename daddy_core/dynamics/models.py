@@ -23,16 +23,13 @@ def thrust_magnitude(u):
     return dm.sqrt(u[0] * u[0] + u[1] * u[1] + u[2] * u[2] + THRUST_FLOOR ** 2)
 
 
-def double_integrator_step(dt: float = 1.0):
-    """Discrete double integrator (paper eq. 17), the explicit-Euler map used by the reference.
+def double_integrator_step(x, u, dt):
+    """Discrete double integrator (paper eq. 17) as the reference code steps it: explicit Euler.
 
-    x = [r (3), v (3)], u = acceleration (3); r+ = r + v dt, v+ = v + u dt.
-    Returns f(x, u) -> x+ (a discrete stage map, not a right-hand side).
+    x = [r (3), v (3)], u = acceleration (3), dt = stage length; r+ = r + v dt, v+ = v + u dt.
     """
-    def step(x, u):
-        return dm.stack([x[0] + x[3] * dt, x[1] + x[4] * dt, x[2] + x[5] * dt,
-                         x[3] + u[0] * dt, x[4] + u[1] * dt, x[5] + u[2] * dt])
-    return step
+    return dm.stack([x[0] + x[3] * dt, x[1] + x[4] * dt, x[2] + x[5] * dt,
+                     x[3] + u[0] * dt, x[4] + u[1] * dt, x[5] + u[2] * dt])
 
 
 def two_body(gm: float, exhaust_speed: float):

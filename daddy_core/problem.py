@@ -1,0 +1,212 @@
+"""The optimal-control problem DDP solves (paper eq. 1, 6, 7), in normalised units.
+
+    minimise   sum_k l(x_k, u_k) + phi(x_N, x_t)
+    subject to x_{k+1} = f(x_k, u_k),   g_ineq(x_k, u_k) <= 0,   g_eq(x_k, u_k) = 0,
+               g_tineq(x_N, x_t) <= 0,  g_teq(x_N, x_t) = 0,     x_0 given.
+
+Every function is written once and evaluated on floats and DA, batched over stages: ``x`` has
+shape (nx, B), ``u`` (nu, B), ``dt`` (B,) the stage durations; stage functions return (B,) for
+costs and (n_c, B) for constraints; terminal functions take ``x`` of shape (nx,) (or a DA).
+The stage cost also receives ``hom = (h, delta)``, the fuel homotopy weight and Huber width
+(paper eq. 12-14); energy-optimal problems ignore it or use h = 0.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass, field, replace
+from typing import Callable, Optional
+
+import numpy as np
+
+from .da import functions as dm
+from .dynamics.units import Spacecraft, Units, unit_units
+from .errors import DaddyError
+from .integrators import rk4, rk78
+
+StageFn = Callable  # (x, u, dt) -> array (n, B)
+
+
+@dataclass(frozen=True)
+class Problem:
+    """A discrete-time optimal-control problem (see the module docstring).
+
+    Attributes:
+        name: label used in reports.
+        x0: (nx,) initial state; x_target: (nx,) target state.
+        stage_dt: (N,) stage durations (normalised time).
+        step: f(x, u, dt) -> next state, the flow over one stage (float or DA, batched).
+        stage_cost: l(x, u, dt, hom) -> (B,).
+        terminal_cost: phi(x, x_target) -> scalar.
+        g_ineq, g_eq: path constraints (x, u, dt) -> (n, B), or None.
+        g_tineq, g_teq: terminal constraints (x, x_target) -> (n,), or None.
+        units: normalisation units (SI at the boundary); spacecraft: for mass reporting or None.
+        u_max: thrust bound in normalised units (None if unbounded); reported and checked.
+        mass_index: index of the mass in the state, or None.
+    """
+
+    name: str
+    x0: np.ndarray
+    x_target: np.ndarray
+    stage_dt: np.ndarray
+    step: Callable
+    stage_cost: Callable
+    terminal_cost: Callable
+    g_ineq: Optional[StageFn] = None
+    g_eq: Optional[StageFn] = None
+    g_tineq: Optional[Callable] = None
+    g_teq: Optional[Callable] = None
+    nu: int = 3
+    units: Units = field(default_factory=unit_units)
+    spacecraft: Optional[Spacecraft] = None
+    u_max: Optional[float] = None
+    mass_index: Optional[int] = None
+    rhs: Optional[Callable] = None  # continuous dynamics, for re-propagation checks
+
+    def __post_init__(self):
+        x0 = np.asarray(self.x0, dtype=float)
+        xt = np.asarray(self.x_target, dtype=float)
+        dt = np.asarray(self.stage_dt, dtype=float)
+        if x0.ndim != 1 or x0.size == 0:
+            raise DaddyError(f"problem.x0 must be a non-empty vector, got shape {x0.shape}")
+        if xt.shape != x0.shape:
+            raise DaddyError(f"problem.x_target must have shape {x0.shape}, got {xt.shape}")
+        if not (np.all(np.isfinite(x0)) and np.all(np.isfinite(xt))):
+            raise DaddyError("problem.x0 / x_target contain NaN or inf")
+        if dt.ndim != 1 or dt.size < 1:
+            raise DaddyError(f"problem.stage_dt must be a vector of N >= 1 durations, got {dt.shape}")
+        if not np.all(np.isfinite(dt)) or np.any(dt <= 0):
+            raise DaddyError("problem.stage_dt: every stage duration must be positive and finite")
+        if not (isinstance(self.nu, (int, np.integer)) and self.nu >= 1):
+            raise DaddyError(f"problem.nu must be a positive integer, got {self.nu!r}")
+        object.__setattr__(self, "x0", x0)
+        object.__setattr__(self, "x_target", xt)
+        object.__setattr__(self, "stage_dt", dt)
+
+    @property
+    def nx(self) -> int:
+        return self.x0.size
+
+    @property
+    def N(self) -> int:
+        return self.stage_dt.size
+
+    def with_x0(self, x0, stage_dt=None) -> "Problem":
+        """A copy starting from another state (and optionally other stage durations)."""
+        return replace(self, x0=np.asarray(x0, float),
+                       stage_dt=self.stage_dt if stage_dt is None else np.asarray(stage_dt, float))
+
+    # -- batched evaluation helpers (floats or DA) ------------------------------------------
+    def path_constraints(self, x, u, dt):
+        """Stacked [g_ineq; g_eq] (n_ineq + n_eq, B) and the count of inequalities."""
+        parts, n_ineq = [], 0
+        if self.g_ineq is not None:
+            gi = self.g_ineq(x, u, dt)
+            n_ineq = len(gi)
+            parts.append(gi)
+        if self.g_eq is not None:
+            parts.append(self.g_eq(x, u, dt))
+        if not parts:
+            return None, 0
+        return (parts[0] if len(parts) == 1 else dm.concatenate(parts)), n_ineq
+
+    def terminal_constraints(self, x):
+        """Stacked [g_tineq; g_teq] (n,) and the count of inequalities."""
+        parts, n_ineq = [], 0
+        if self.g_tineq is not None:
+            gi = self.g_tineq(x, self.x_target)
+            n_ineq = len(gi)
+            parts.append(gi)
+        if self.g_teq is not None:
+            parts.append(self.g_teq(x, self.x_target))
+        if not parts:
+            return None, 0
+        return (parts[0] if len(parts) == 1 else dm.concatenate(parts)), n_ineq
+
+    def rollout(self, U: np.ndarray, x0=None) -> np.ndarray:
+        """Propagate controls U (N, nu) from x0 with the stage map, one stage at a time -> X."""
+        X = np.empty((self.N + 1, self.nx))
+        X[0] = self.x0 if x0 is None else x0
+        for k in range(self.N):
+            X[k + 1] = self.step(X[k][:, None], U[k][:, None], self.stage_dt[k:k + 1])[:, 0]
+        return X
+
+
+# ---------------------------------------------------------------------------------- builders
+def flow_step(rhs, integrator: str = "rk78", tol: float = 1e-13, rk4_steps: int = 20):
+    """Stage map f(x, u, dt) from a continuous right-hand side and an integrator."""
+    if integrator == "rk78":
+        return lambda x, u, dt: rk78(rhs, x, u, 0.0, dt, tol=tol)
+    if integrator == "rk4":
+        return lambda x, u, dt: rk4(rhs, x, u, 0.0, dt, steps=rk4_steps)
+    raise DaddyError(f"integrator must be 'rk78' or 'rk4', got {integrator!r}")
+
+
+def low_thrust_costs(n_pos: int, u_max: float, dt_avg: float, stage_gain: float,
+                     terminal_gain: float):
+    """Paper/reference-code costs for low-thrust transfers.
+
+    Stage cost (eq. 14 with the reference's scaling): with w = u dt / (dt_avg u_max),
+        l = (1 - h) * gain/2 * |w|^2 + h * gain * delta * (sqrt(1 + |w|^2 / delta^2) - 1);
+    h = 0 is energy-optimal, and as delta -> 0 the second term tends to gain * |w| (fuel).
+    Terminal cost: terminal_gain / 2 * |x[:n_pos] - x_t[:n_pos]|^2.
+    """
+    scale = 1.0 / (dt_avg * u_max)
+
+    def stage_cost(x, u, dt, hom=(0.0, 1.0)):
+        h, delta = hom
+        s = dt * scale
+        w2 = (u[0] * u[0] + u[1] * u[1] + u[2] * u[2]) * (s * s)
+        energy = w2 * (0.5 * stage_gain)
+        if h == 0.0:
+            return energy
+        huber = (dm.sqrt(w2 * (1.0 / (delta * delta)) + 1.0) - 1.0) * (stage_gain * delta)
+        return energy * (1.0 - h) + huber * h
+
+    def terminal_cost(x, xt):
+        e = x[:n_pos] - xt[:n_pos]
+        return dm.dot(e, e) * (0.5 * terminal_gain)
+
+    return stage_cost, terminal_cost
+
+
+def problem_from_case(case, integrator: str = "rk78", integrator_tol: float | None = None,
+                      stages: int | None = None) -> Problem:
+    """Build the paper's problem for a catalogue ``Case`` (costs, constraints, units)."""
+    s = case.solver
+    N = case.stages if stages is None else int(stages)
+    if N < 1:
+        raise DaddyError(f"stages must be >= 1, got {N}")
+    dt = np.full(N, case.tof / N)
+    if case.system == "double_integrator":
+        from .dynamics.models import double_integrator_step as step
+
+        def stage_cost(x, u, d, hom=(0.0, 1.0)):
+            return u[0] * u[0] + u[1] * u[1] + u[2] * u[2]
+
+        def terminal_cost(x, xt):
+            e = x[:3] - xt[:3]
+            return dm.dot(e, e)
+
+        return Problem(name=case.name, x0=case.x0, x_target=case.x_target, stage_dt=dt, step=step,
+                       stage_cost=stage_cost, terminal_cost=terminal_cost,
+                       g_teq=lambda x, xt: x[:3] - xt[:3], units=case.units)
+
+    sc = case.spacecraft
+    units = case.units
+    u_max = float(units.thrust(sc.max_thrust_n))
+    m_dry = sc.dry_mass_kg / units.mu_kg
+    n_pos = 5 if case.system == "earth_equinoctial" else 6
+    stage_cost, terminal_cost = low_thrust_costs(
+        n_pos, u_max, case.tof / N, s.get("stage_cost_gain", 1e-2), s.get("terminal_cost_gain", 1e4))
+    rhs = case.rhs()
+    tol = integrator_tol if integrator_tol is not None else s.get("integrator_tol", 1e-13)
+
+    def g_ineq(x, u, d):
+        # thrust bound |u|^2 / u_max^2 - 1 <= 0 and dry mass m_dry - m <= 0 (paper eq. 18)
+        return dm.stack([(u[0] * u[0] + u[1] * u[1] + u[2] * u[2]) * (1.0 / u_max ** 2) - 1.0,
+                         m_dry - x[6]])
+
+    return Problem(name=case.name, x0=case.x0, x_target=case.x_target, stage_dt=dt,
+                   step=flow_step(rhs, integrator, tol), stage_cost=stage_cost,
+                   terminal_cost=terminal_cost, g_ineq=g_ineq,
+                   g_teq=lambda x, xt: x[:n_pos] - xt[:n_pos], units=units, spacecraft=sc,
+                   u_max=u_max, mass_index=6, rhs=rhs)

@@ -1,0 +1,249 @@
+"""Differential dynamic programming with DA expansions (paper section III.A).
+
+Backward sweeps: Std (Alg. 7, no dynamics Hessians), Hess (Alg. 9, with them) and Q (Alg. 10,
+Q_k built by composing the cost-to-go polynomial with the stage map). Forward passes: Std
+(Alg. 6, integrate every stage, then re-expand all maps in one batch) and Dyn (Alg. 8, evaluate
+the stored map when the deviation is inside its convergence radius, integrate otherwise; then
+re-expand only the integrated stages in one batch and re-centre the others by one batched
+composition). The loop is Alg. 3 with a backtracking line search and Quu regularisation.
+"""
+from __future__ import annotations
+
+import time
+from dataclasses import dataclass, field
+
+import numpy as np
+from scipy.linalg import LinAlgError, cho_factor, cho_solve
+
+from .. import da
+from ..errors import DaddyError
+from .expansion import Stages, augmented_cost, expand_dynamics
+
+
+@dataclass
+class DDPStats:
+    """Counters and timings accumulated over DDP solves."""
+
+    iterations: int = 0
+    forward_s: float = 0.0
+    expansion_s: float = 0.0
+    backward_s: float = 0.0
+    stages_total: int = 0
+    stages_polynomial: int = 0
+    history: list = field(default_factory=list)
+
+    @property
+    def polynomial_share(self) -> float:
+        return self.stages_polynomial / self.stages_total if self.stages_total else 0.0
+
+
+@dataclass
+class Gains:
+    """Feedback law u = u_k + alpha a_k + b_k dx_k from a backward sweep (eq. 4-5).
+
+    a: (N, nu); b: (N, nu, nx); dv1 = sum a.Q_u; dv2 = sum a.Q_uu.a / 2 (expected change:
+    alpha dv1 + alpha^2 dv2).
+    """
+
+    a: np.ndarray
+    b: np.ndarray
+    dv1: float
+    dv2: float
+
+
+# ---------------------------------------------------------------------------- backward sweeps
+def _quadratic_da(grad: np.ndarray, hess: np.ndarray) -> da.DA:
+    """The DA of v(dx) = grad.dx + dx^T hess dx / 2 (zero constant part)."""
+    n = grad.size
+    T = da.tables(n, 2)
+    c = np.zeros(T.size)
+    c[1:n + 1] = grad
+    q = hess[T.triu_i, T.triu_j].copy()
+    q[~T.offdiag] *= 0.5
+    c[n + 1:] = q
+    return da.DA(c, T)
+
+
+def _feedback_map(ak: np.ndarray, bk: np.ndarray) -> da.DA:
+    """The map dx -> [dx, a_k + b_k dx] as a DA of shape (nx + nu,) in nx variables."""
+    nu, nx = bk.shape
+    T = da.tables(nx, 2)
+    c = np.zeros((T.size, nx + nu))
+    c[1 + np.arange(nx), np.arange(nx)] = 1.0
+    c[0, nx:] = ak
+    c[1:nx + 1, nx:] = bk.T
+    return da.DA(c, T)
+
+
+def backward_sweep(st: Stages, sweep: str, rho: float) -> Gains | None:
+    """One backward sweep; returns None when Q_uu + rho I is not positive definite."""
+    p = st.problem
+    nx, nu, N = p.nx, p.nu, p.N
+    fz = np.moveaxis(st.F.gradient(), 1, 0)  # (N, nx, n)
+    fzz = np.moveaxis(st.F.hessian(), 1, 0) if sweep == "hess" else None
+    Vx, Vxx = st.phix.copy(), st.phixx.copy()
+    a = np.zeros((N, nu))
+    b = np.zeros((N, nu, nx))
+    dv1 = dv2 = 0.0
+    eye = np.eye(nu)
+    for k in range(N - 1, -1, -1):
+        if sweep == "q":
+            # Alg. 10: P_Q = P_l + P_V(P_f - x_{k+1}); derivatives read from its coefficients
+            fk = st.F[:, k] - st.X[k + 1]
+            pq = da.compose(_quadratic_da(Vx, Vxx), fk)
+            Qz = st.lz[k] + pq.gradient()
+            Qzz = st.lzz[k] + pq.hessian()
+        else:
+            J = fz[k]
+            Qz = st.lz[k] + J.T @ Vx                       # eq. 3, first-order terms
+            Qzz = st.lzz[k] + J.T @ Vxx @ J
+            if fzz is not None:                           # Alg. 9: + sum_i V_x^i f^i_zz
+                Qzz = Qzz + np.tensordot(Vx, fzz[k], axes=(0, 0))
+        Qx, Qu = Qz[:nx], Qz[nx:]
+        Qxx, Qux, Quu = Qzz[:nx, :nx], Qzz[nx:, :nx], Qzz[nx:, nx:]
+        try:
+            cf = cho_factor(Quu + rho * eye, lower=True, check_finite=True)
+        except (LinAlgError, ValueError):
+            return None
+        ak = -cho_solve(cf, Qu)
+        bk = -cho_solve(cf, Qux)
+        a[k], b[k] = ak, bk
+        dv1 += ak @ Qu
+        dv2 += 0.5 * ak @ Quu @ ak
+        if sweep == "q":
+            # Alg. 10: P_V,k = P_Q,k(dx, a_k + b_k dx)
+            pv = da.compose(_quadratic_da(Qz, Qzz), _feedback_map(ak, bk))
+            Vx, Vxx = pv.gradient(), pv.hessian()
+        else:
+            Vx = Qx + bk.T @ Quu @ ak + bk.T @ Qu + Qux.T @ ak
+            Vxx = Qxx + bk.T @ Quu @ bk + bk.T @ Qux + Qux.T @ bk
+            Vxx = 0.5 * (Vxx + Vxx.T)
+    return Gains(a, b, float(dv1), float(dv2))
+
+
+# ----------------------------------------------------------------------------- forward passes
+def forward_pass(st: Stages, gains: Gains, alpha: float, dyn: bool):
+    """Roll the feedback law out (Alg. 6 / Alg. 8).
+
+    Returns:
+        X* (N+1, nx), U* (N, nu), poly (N,) bool: stage propagated by the stored map,
+        dz (n, N): the stage deviations [dx; du] from the nominal.
+    """
+    p = st.problem
+    N, nx = p.N, p.nx
+    X = np.empty((N + 1, nx))
+    U = np.empty((N, p.nu))
+    X[0] = p.x0
+    poly = np.zeros(N, dtype=bool)
+    dz = np.empty((nx + p.nu, N))
+    for k in range(N):
+        dx = X[k] - st.X[k]
+        du = alpha * gains.a[k] + gains.b[k] @ dx
+        U[k] = st.U[k] + du
+        dz[:nx, k], dz[nx:, k] = dx, du
+        if dyn and np.sqrt(dx @ dx + du @ du) < st.radius[k]:
+            X[k + 1] = da.evaluate(st.F[:, k], dz[:, k])   # eq. 11, first case
+            poly[k] = True
+        else:
+            X[k + 1] = p.step(X[k][:, None], U[k][:, None], p.stage_dt[k:k + 1])[:, 0]
+        if not np.all(np.isfinite(X[k + 1])):
+            raise DaddyError(f"forward pass produced a non-finite state at stage {k}")
+    return X, U, poly, dz
+
+
+def new_maps(st: Stages, X, U, poly, dz, dyn: bool):
+    """Stage maps at the new nominal: one batched expansion of the integrated stages and one
+    batched re-centring (composition) of the stages served by their polynomial."""
+    p = st.problem
+    if not dyn or not np.any(poly):
+        return expand_dynamics(p, X[:-1], U, p.stage_dt)
+    c = np.empty_like(st.F.c)
+    inside = np.flatnonzero(poly)
+    outside = np.flatnonzero(~poly)
+    c[..., inside] = da.shift(st.F[:, inside], dz[:, inside]).c
+    if outside.size:
+        c[..., outside] = expand_dynamics(p, X[outside], U[outside], p.stage_dt[outside]).c
+    return da.DA(c, st.F.T)
+
+
+# ----------------------------------------------------------------------------------- the loop
+@dataclass
+class DDPResult:
+    stages: Stages
+    converged: bool
+    iterations: int
+    reason: str
+
+
+def _raise_rho(rho: float, opts) -> float:
+    return max(rho * opts.rho_factor, opts.rho_min)
+
+
+def _lower_rho(rho: float, opts) -> float:
+    r = rho / opts.rho_factor
+    return r if r >= opts.rho_min else 0.0
+
+
+def ddp(st: Stages, sweep: str, dyn: bool, opts, stats: DDPStats, deadline: float | None = None,
+        alpha0: float = 1.0) -> DDPResult:
+    """Alg. 3: iterate backward sweep + forward pass until the relative cost decrease is small.
+
+    The line search accepts a step when actual / expected decrease lies in
+    (ls_min_ratio, ls_max_ratio), halving alpha otherwise; in the Dyn variant alpha carries over
+    between iterations (doubled after an accepted step, capped at 1), as in the reference code.
+    """
+    p = st.problem
+    rho = opts.rho_init
+    alpha = alpha0
+    J = st.cost
+    for it in range(1, opts.ddp_max_iter + 1):
+        if deadline is not None and time.perf_counter() > deadline:
+            return DDPResult(st, False, it - 1, "time budget exceeded")
+        t0 = time.perf_counter()
+        gains = backward_sweep(st, sweep, rho)
+        stats.backward_s += time.perf_counter() - t0
+        if gains is None:
+            rho = _raise_rho(rho, opts)
+            if rho > opts.rho_max:
+                return DDPResult(st, False, it, "Q_uu not positive definite up to rho_max")
+            continue
+        accepted = False
+        a = alpha if dyn else 1.0
+        t0 = time.perf_counter()
+        for _ in range(opts.ls_max_halvings + 1):
+            try:
+                X, U, poly, dz = forward_pass(st, gains, a, dyn)
+                Jn = augmented_cost(p, X, U, st.mult, st.hom)
+            except (DaddyError, FloatingPointError, OverflowError):
+                a *= opts.ls_shrink
+                continue
+            expected = -(a * gains.dv1 + a * a * gains.dv2)
+            actual = J - Jn
+            if np.isfinite(Jn) and (
+                    (expected > 0 and opts.ls_min_ratio < actual / expected < opts.ls_max_ratio)
+                    or (expected <= 1e-15 * max(1.0, abs(J)) and actual >= 0)):
+                accepted = True
+                break
+            a *= opts.ls_shrink
+        stats.forward_s += time.perf_counter() - t0
+        if not accepted:
+            rho = _raise_rho(rho, opts)
+            if rho > opts.rho_max:
+                return DDPResult(st, False, it, "line search failed up to rho_max")
+            continue
+        stats.iterations += 1
+        stats.stages_total += p.N
+        stats.stages_polynomial += int(poly.sum())
+        t0 = time.perf_counter()
+        F = new_maps(st, X, U, poly, dz, dyn)
+        st = Stages(p, X, U, st.mult, st.hom, st.eps_da, F=F)
+        stats.expansion_s += time.perf_counter() - t0
+        rel = (J - Jn) / max(abs(J), 1e-300)
+        J = st.cost
+        stats.history.append({"cost": J, "alpha": a, "rho": rho, "poly": int(poly.sum())})
+        rho = _lower_rho(rho, opts)
+        if dyn:
+            alpha = min(1.0, 2.0 * a)
+        if it >= 3 and 0.0 <= rel < opts.tol_ddp:
+            return DDPResult(st, True, it, "relative cost decrease below tol_ddp")
+    return DDPResult(st, False, opts.ddp_max_iter, "ddp_max_iter reached")

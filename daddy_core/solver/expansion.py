@@ -1,0 +1,157 @@
+"""Batched second-order expansions of a trajectory: stage maps, augmented costs, constraints.
+
+All stages are expanded in one vectorised DA call (batch axis = stage). The DA variables of a
+stage are z = [dx (nx), du (nu)], n = nx + nu of them.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from .. import da
+from ..da import functions as dm
+from ..errors import DaddyError
+
+
+@dataclass
+class Multipliers:
+    """AUL duals and penalties (paper eq. 8-9): path (n_c, N) and terminal (n_t,)."""
+
+    lam: np.ndarray
+    mu: np.ndarray
+    lam_t: np.ndarray
+    mu_t: np.ndarray
+    n_ineq: int
+    n_tineq: int
+
+    @classmethod
+    def initial(cls, problem, mu0: float) -> "Multipliers":
+        x = problem.x0[:, None]
+        u = np.zeros((problem.nu, 1))
+        g, ni = problem.path_constraints(x, u, problem.stage_dt[:1])
+        gt, nti = problem.terminal_constraints(problem.x0)
+        nc = 0 if g is None else g.shape[0]
+        nt = 0 if gt is None else gt.shape[0]
+        N = problem.N
+        return cls(np.zeros((nc, N)), np.full((nc, N), mu0), np.zeros(nt), np.full(nt, mu0), ni, nti)
+
+
+def penalty(g, lam, mu, n_ineq: int):
+    """sum_i (lam_i + I_mu,i / 2 g_i) g_i over the first axis (paper eq. 8).
+
+    I_mu,i = 0 for an inequality that is satisfied (g_i < 0) with lam_i = 0, else mu_i; the
+    active set is decided on the constant part, so the same set is used for values and
+    derivatives.
+    """
+    g0 = dm.cons(g)
+    imu = np.array(mu, dtype=float, copy=True)
+    if n_ineq:
+        inactive = (g0[:n_ineq] < 0) & (lam[:n_ineq] == 0)
+        imu[:n_ineq] = np.where(inactive, 0.0, imu[:n_ineq])
+    terms = (lam + imu * 0.5 * g) * g
+    out = terms[0]
+    for i in range(1, len(terms)):
+        out = out + terms[i]
+    return out
+
+
+def max_violation(g, n_ineq: int) -> float:
+    """Max constraint violation: max(g, 0) for inequalities, |g| for equalities."""
+    if g is None or np.size(g) == 0:
+        return 0.0
+    g = np.asarray(g, dtype=float)
+    v = np.abs(g)
+    v[:n_ineq] = np.maximum(g[:n_ineq], 0.0)
+    return float(v.max())
+
+
+class Stages:
+    """The expansions of one nominal trajectory (X, U) for the current multipliers.
+
+    Attributes:
+        X: (N+1, nx), U: (N, nu) nominal.
+        F: DA (nx, N): second-order stage maps in z = [dx, du].
+        radius: (N,) convergence radii of F at accuracy eps_da.
+        lz: (N, n), lzz: (N, n, n): derivatives of the augmented stage cost.
+        phix: (nx,), phixx: (nx, nx): derivatives of the augmented terminal cost.
+        cost: augmented cost J of the nominal.
+    """
+
+    def __init__(self, problem, X, U, mult: Multipliers, hom, eps_da: float, F=None):
+        self.problem = problem
+        self.X = np.asarray(X, dtype=float)
+        self.U = np.asarray(U, dtype=float)
+        self.mult = mult
+        self.hom = hom
+        self.eps_da = eps_da
+        self.F = F if F is not None else expand_dynamics(problem, self.X[:-1], self.U,
+                                                                 problem.stage_dt)
+        self.radius = da.radius(self.F, eps_da)
+        self._expand_costs()
+
+    @property
+    def n(self) -> int:
+        return self.problem.nx + self.problem.nu
+
+    def _expand_costs(self):
+        p, m = self.problem, self.mult
+        z = da.variables(np.concatenate([self.X[:-1].T, self.U.T]), order=2)
+        x, u = z[:p.nx], z[p.nx:]
+        lt = p.stage_cost(x, u, p.stage_dt, self.hom)
+        g, _ = p.path_constraints(x, u, p.stage_dt)
+        if g is not None:
+            lt = lt + penalty(g, m.lam, m.mu, m.n_ineq)
+        if not isinstance(lt, da.DA):  # a cost without any dependence on (x, u)
+            lt = da.constant(lt, self.n) + z[0] * 0.0
+        self.lz = lt.gradient()
+        self.lzz = lt.hessian()
+        xn = da.variables(self.X[-1], order=2)
+        phi = p.terminal_cost(xn, p.x_target)
+        gt, _ = p.terminal_constraints(xn)
+        if gt is not None:
+            phi = phi + penalty(gt, m.lam_t, m.mu_t, m.n_tineq)
+        self.phix = phi.gradient()
+        self.phixx = phi.hessian()
+        self.cost = float(np.sum(lt.cons) + phi.cons)
+
+
+def expand_dynamics(problem, X: np.ndarray, U: np.ndarray, dt: np.ndarray):
+    """Order-2 stage maps at (X[k], U[k]) for the given stages, in one batched call.
+
+    Args:
+        X: (B, nx) stage start states; U: (B, nu) controls; dt: (B,) stage durations.
+    Returns:
+        DA of shape (nx, B) in n = nx + nu variables.
+    """
+    if X.shape[0] == 0:
+        raise DaddyError("expand_dynamics needs at least one stage")
+    z = da.variables(np.concatenate([X.T, U.T]), order=2)
+    return problem.step(z[:problem.nx], z[problem.nx:], dt)
+
+
+def augmented_cost(problem, X, U, mult: Multipliers, hom) -> float:
+    """Augmented cost J~ of a trajectory in floats (the forward pass's J*)."""
+    x, u = X[:-1].T, U.T
+    lt = problem.stage_cost(x, u, problem.stage_dt, hom)
+    g, _ = problem.path_constraints(x, u, problem.stage_dt)
+    total = float(np.sum(lt))
+    if g is not None:
+        total += float(np.sum(penalty(g, mult.lam, mult.mu, mult.n_ineq)))
+    total += float(problem.terminal_cost(X[-1], problem.x_target))
+    gt, _ = problem.terminal_constraints(X[-1])
+    if gt is not None:
+        total += float(penalty(gt, mult.lam_t, mult.mu_t, mult.n_tineq))
+    return total
+
+
+def constraint_values(problem, X, U):
+    """Path constraints (n_c, N) and terminal constraints (n_t,) in floats (None if absent)."""
+    g, ni = problem.path_constraints(X[:-1].T, U.T, problem.stage_dt)
+    gt, nti = problem.terminal_constraints(X[-1])
+    return g, ni, gt, nti
+
+
+def total_violation(problem, X, U) -> float:
+    g, ni, gt, nti = constraint_values(problem, X, U)
+    return max(max_violation(g, ni), max_violation(gt, nti))

@@ -1,0 +1,105 @@
+"""Solver options: small typed objects instead of a 40-field parameter bag."""
+from __future__ import annotations
+
+from dataclasses import dataclass, field, fields, replace
+
+from ..errors import DaddyError
+
+METHODS = ("std", "hess", "q", "dyn", "hessdyn", "qdyn")  # paper Table 1
+
+
+@dataclass(frozen=True)
+class SolverOptions:
+    """Tolerances and algorithm parameters (defaults: the reference code's values).
+
+    Attributes:
+        tol_ddp: relative cost decrease that stops a DDP solve (after >= 3 iterations).
+        tol_aul: maximum constraint violation that stops the augmented Lagrangian.
+        tol_newton: maximum constraint violation targeted by Newton polishing.
+        rho_init, rho_min, rho_max, rho_factor: Quu regularisation schedule.
+        ls_min_ratio, ls_max_ratio, ls_shrink, ls_max_halvings: backtracking line search; a step
+            is accepted when actual / expected decrease is in (min, max).
+        ddp_max_iter, aul_max_iter, newton_max_iter: iteration bounds.
+        lambda_max, mu_init, mu_max, mu_growth: multiplier bound and penalty schedule.
+        newton_cv_ratio: the polishing's convergence-rate threshold (eps_CV, paper Alg. 5).
+        newton_active_tol: an inequality with g > -tol is treated as active in the polishing.
+        newton_regularisation: diagonal added to Delta Delta^T if it is not positive definite.
+        homotopy: sequence of (h, delta) pairs for the fuel-optimal homotopy (h = Huber weight).
+        time_budget_s: wall-clock budget for the whole solve (None: unbounded).
+        verbose: print progress lines (homotopy step, AUL iteration, violation, cost).
+    """
+
+    tol_ddp: float = 1e-4
+    tol_aul: float = 1e-6
+    tol_newton: float = 1e-10
+    rho_init: float = 0.0
+    rho_min: float = 1e-8
+    rho_max: float = 1e8
+    rho_factor: float = 1.6
+    ls_min_ratio: float = 1e-8
+    ls_max_ratio: float = 10.0
+    ls_shrink: float = 0.5
+    ls_max_halvings: int = 20
+    ddp_max_iter: int = 200
+    aul_max_iter: int = 40
+    newton_max_iter: int = 60
+    lambda_max: float = 1e8
+    mu_init: float = 1.0
+    mu_max: float = 1e8
+    mu_growth: float = 10.0
+    newton_cv_ratio: float = 1.1
+    newton_active_tol: float = 1e-6
+    newton_regularisation: float = 1e-12
+    homotopy: tuple = ((0.0, 1e-2),)
+    time_budget_s: float | None = None
+    verbose: bool = False
+
+    def __post_init__(self):
+        for f in fields(self):
+            v = getattr(self, f.name)
+            if f.name in ("homotopy", "verbose", "time_budget_s"):
+                continue
+            if not isinstance(v, (int, float)) or v != v or v < 0:
+                raise DaddyError(f"options.{f.name} must be a non-negative number, got {v!r}")
+        for name in ("tol_ddp", "tol_aul", "tol_newton", "rho_max", "rho_factor", "mu_growth"):
+            if getattr(self, name) <= 0:
+                raise DaddyError(f"options.{name} must be > 0")
+        hom = tuple(tuple(map(float, p)) for p in self.homotopy)
+        if not hom or any(len(p) != 2 or not (0 <= p[0] <= 1) or not p[1] > 0 for p in hom):
+            raise DaddyError("options.homotopy must be a non-empty sequence of (h in [0, 1], delta > 0)")
+        object.__setattr__(self, "homotopy", hom)
+        if self.time_budget_s is not None and not self.time_budget_s > 0:
+            raise DaddyError(f"options.time_budget_s must be > 0, got {self.time_budget_s!r}")
+
+    @property
+    def eps_da(self) -> float:
+        """Accuracy of the Dyn method's polynomial radius: min(eps_AUL, eps_DDP)."""
+        return min(self.tol_aul, self.tol_ddp)
+
+    def with_(self, **kw) -> "SolverOptions":
+        return replace(self, **kw)
+
+
+def parse_method(method: str) -> tuple[str, bool]:
+    """'qdyn' -> ('q', True): the backward sweep and whether the forward pass is Dyn (Alg. 8)."""
+    if method not in METHODS:
+        raise DaddyError(f"method must be one of {METHODS}, got {method!r}")
+    if method == "dyn":
+        return "std", True
+    if method.endswith("dyn"):
+        return method[:-3], True
+    return method, False
+
+
+def case_options(case, fuel_optimal: bool, **overrides) -> SolverOptions:
+    """The paper's solver settings for a catalogue case."""
+    s = case.solver
+    hom = s.get("homotopy", {"h": [0.0], "delta": [1e-2]})
+    pairs = tuple(zip(hom["h"], hom["delta"])) if fuel_optimal else ((0.0, hom["delta"][0]),)
+    kw = dict(tol_ddp=s.get("tol_ddp", 1e-4), tol_aul=s.get("tol_aul", 1e-6),
+              tol_newton=s.get("tol_newton", 1e-10), rho_max=s.get("rho_max", 1e8), homotopy=pairs)
+    kw.update(overrides)
+    return SolverOptions(**kw)
+
+
+__all__ = ["METHODS", "SolverOptions", "parse_method", "case_options", "field"]

@@ -1,0 +1,117 @@
+"""The result of a solve: trajectory, gains, figures of merit; JSON/NPZ round trip; warm start."""
+from __future__ import annotations
+
+import json
+from dataclasses import asdict, dataclass, field
+from pathlib import Path
+
+import numpy as np
+
+from ..errors import DaddyError
+
+
+@dataclass
+class Solution:
+    """A solved (or best-so-far) trajectory.
+
+    Arrays are normalised (the problem's units); ``X_si`` / ``U_newton`` give SI views.
+
+    Attributes:
+        case, method, fuel_optimal, converged, reason: what was solved and how it ended.
+        X: (N+1, nx) states; U: (N, nu) controls; stage_dt: (N,) durations.
+        gains_a: (N, nu), gains_b: (N, nu, nx): feedback law of the last backward sweep.
+        cost: objective sum l + phi (without the augmented-Lagrangian terms).
+        max_violation: max constraint violation (normalised; inequality max(g, 0), |g| else).
+        final_mass_kg, propellant_kg: mass figures (None without a mass state).
+        repropagation_miss: terminal miss after re-propagating U from x0 with DOP853 at
+            rtol = atol = 1e-12 (normalised, over the terminal-constraint components).
+        iterations: {homotopy, aul, ddp, newton}; runtime_s: {total, ddp, newton, ...}.
+        history: per-homotopy-step summaries; units: {lu_km, tu_s, mu_kg, thrust_unit_n}.
+    """
+
+    case: str
+    method: str
+    fuel_optimal: bool
+    converged: bool
+    reason: str
+    X: np.ndarray
+    U: np.ndarray
+    stage_dt: np.ndarray
+    gains_a: np.ndarray
+    gains_b: np.ndarray
+    cost: float
+    max_violation: float
+    final_mass_kg: float | None
+    propellant_kg: float | None
+    repropagation_miss: float | None
+    iterations: dict = field(default_factory=dict)
+    runtime_s: dict = field(default_factory=dict)
+    history: list = field(default_factory=list)
+    units: dict = field(default_factory=dict)
+    polynomial_share: float = 0.0
+
+    _ARRAYS = ("X", "U", "stage_dt", "gains_a", "gains_b")
+
+    @property
+    def N(self) -> int:
+        return self.U.shape[0]
+
+    @property
+    def U_newton(self) -> np.ndarray:
+        """Thrust in newtons (N, 3)."""
+        return self.U * self.units.get("thrust_unit_n", 1.0)
+
+    @property
+    def X_si(self) -> np.ndarray:
+        """States in SI: position m, velocity m/s, mass kg (Cartesian systems)."""
+        u = self.units
+        X = self.X.copy()
+        if X.shape[1] >= 6 and u.get("system") in ("sun_two_body", "earth_moon_cr3bp"):
+            X[:, :3] *= u["lu_km"] * 1e3
+            X[:, 3:6] *= u["lu_km"] * 1e3 / u["tu_s"]
+        if X.shape[1] == 7:
+            X[:, 6] *= u.get("mu_kg", 1.0)
+        return X
+
+    def to_dict(self) -> dict:
+        d = {k: v for k, v in asdict(self).items() if k not in self._ARRAYS}
+        for k in self._ARRAYS:
+            d[k] = np.asarray(getattr(self, k)).tolist()
+        if self.units.get("thrust_unit_n"):
+            d["U_N"] = self.U_newton.tolist()
+            d["X_SI"] = self.X_si.tolist()
+        return d
+
+    def to_json(self, path: str | Path | None = None) -> str:
+        text = json.dumps(self.to_dict(), indent=1, allow_nan=False)
+        if path is not None:
+            Path(path).write_text(text)
+        return text
+
+    @classmethod
+    def from_dict(cls, d: dict) -> "Solution":
+        names = {f for f in cls.__dataclass_fields__}
+        kw = {k: v for k, v in d.items() if k in names}
+        for k in cls._ARRAYS:
+            if k not in kw:
+                raise DaddyError(f"solution field {k!r} is missing")
+            kw[k] = np.asarray(kw[k], dtype=float)
+        return cls(**kw)
+
+    @classmethod
+    def from_json(cls, path_or_text: str | Path) -> "Solution":
+        p = Path(path_or_text)
+        text = p.read_text() if p.exists() else str(path_or_text)
+        return cls.from_dict(json.loads(text))
+
+    def to_npz(self, path: str | Path) -> None:
+        meta = {k: v for k, v in self.to_dict().items() if k not in self._ARRAYS + ("U_N", "X_SI")}
+        np.savez(path, meta=json.dumps(meta), **{k: getattr(self, k) for k in self._ARRAYS})
+
+    @classmethod
+    def from_npz(cls, path: str | Path) -> "Solution":
+        with np.load(path) as z:
+            d = json.loads(str(z["meta"]))
+            for k in cls._ARRAYS:
+                d[k] = z[k]
+        return cls.from_dict(d)

@@ -1,0 +1,190 @@
+"""DADDy orchestration (paper Fig. 1): fuel homotopy -> augmented Lagrangian -> DDP, then Newton
+polishing; validation of inputs before any iteration; the Solution with its figures."""
+from __future__ import annotations
+
+import time
+
+import numpy as np
+from scipy.integrate import solve_ivp
+
+from ..errors import DaddyError
+from .aul import aul
+from .ddp import DDPStats, backward_sweep
+from .expansion import Multipliers, Stages, total_violation
+from .newton import polish as newton_polish
+from .options import SolverOptions, parse_method
+from .solution import Solution
+
+
+def validate(problem, U0: np.ndarray) -> np.ndarray:
+    """Check the initial guess and that every problem function returns finite values of the
+    right shape at it, before any iteration. Returns U0 as a float (N, nu) array."""
+    N, nu, nx = problem.N, problem.nu, problem.nx
+    try:
+        U0 = np.asarray(U0, dtype=float)
+    except (TypeError, ValueError) as exc:
+        raise DaddyError("u_guess must be a numeric array of shape (N, nu)") from exc
+    if U0.shape != (N, nu):
+        raise DaddyError(f"u_guess must have shape (N, nu) = ({N}, {nu}), got {U0.shape}")
+    if not np.all(np.isfinite(U0)):
+        raise DaddyError("u_guess contains NaN or inf")
+    if problem.spacecraft is not None and problem.mass_index is not None:
+        m = problem.x0[problem.mass_index] * problem.units.mu_kg
+        if m <= problem.spacecraft.dry_mass_kg:
+            raise DaddyError(f"x0 mass ({m:.6g} kg) must exceed the dry mass "
+                             f"({problem.spacecraft.dry_mass_kg:.6g} kg)")
+    x = np.tile(problem.x0[:, None], (1, 2))
+    u = U0[:2].T if N >= 2 else np.tile(U0[0][:, None], (1, 2))
+    dt = problem.stage_dt[:2] if N >= 2 else np.repeat(problem.stage_dt, 2)
+    checks = {
+        "step": lambda: problem.step(x, u, dt),
+        "stage_cost": lambda: problem.stage_cost(x, u, dt, (0.0, 1.0)),
+        "path constraints": lambda: problem.path_constraints(x, u, dt)[0],
+        "terminal_cost": lambda: problem.terminal_cost(problem.x0, problem.x_target),
+        "terminal constraints": lambda: problem.terminal_constraints(problem.x0)[0],
+    }
+    shapes = {"step": (nx, 2), "stage_cost": (2,)}
+    for name, fn in checks.items():
+        try:
+            val = fn()
+        except DaddyError:
+            raise
+        except Exception as exc:  # a user function failing is reported as bad input
+            raise DaddyError(f"problem {name} raised {type(exc).__name__}: {exc}") from exc
+        if val is None:
+            continue
+        val = np.asarray(val, dtype=float)
+        if name in shapes and val.shape != shapes[name]:
+            raise DaddyError(f"problem {name} returned shape {val.shape}, expected {shapes[name]}")
+        if not np.all(np.isfinite(val)):
+            raise DaddyError(f"problem {name} returned NaN or inf at the initial guess")
+    return U0
+
+
+def repropagation_miss(problem, U: np.ndarray) -> float | None:
+    """Terminal miss after re-propagating U from x0 with DOP853 at rtol = atol = 1e-12."""
+    if problem.rhs is None:
+        x = problem.rollout(U)[-1]
+    else:
+        x = problem.x0.copy()
+        for k in range(problem.N):
+            sol = solve_ivp(lambda t, y, uk=U[k]: problem.rhs(t, y, uk), (0.0, problem.stage_dt[k]),
+                            x, method="DOP853", rtol=1e-12, atol=1e-12)
+            x = sol.y[:, -1]
+    gt, nti = problem.terminal_constraints(x)
+    if gt is None:
+        return None
+    return float(np.max(np.abs(gt)))
+
+
+def objective(problem, X, U, hom) -> float:
+    """The problem's own cost sum l + phi (no augmented-Lagrangian terms)."""
+    return float(np.sum(problem.stage_cost(X[:-1].T, U.T, problem.stage_dt, hom))
+                 + problem.terminal_cost(X[-1], problem.x_target))
+
+
+def solve(problem, u_guess=None, method: str = "dyn", fuel_optimal: bool | None = None,
+          polish: bool = True, options: SolverOptions | None = None, case_name: str | None = None,
+          progress=None) -> Solution:
+    """Solve ``problem`` with DADDy.
+
+    Args:
+        problem: a ``Problem``.
+        u_guess: (N, nu) initial controls, or a ``Solution`` to warm-start from (its U).
+        method: one of std, hess, q, dyn, hessdyn, qdyn (paper Table 1).
+        fuel_optimal: run the whole homotopy of ``options.homotopy`` (True) or only its first,
+            energy-optimal step (False). None: True when the homotopy has more than one step.
+        polish: finish with the Newton polishing (Alg. 11) to ``options.tol_newton``.
+        options: ``SolverOptions``.
+        progress: callable receiving progress lines (or None).
+    Returns:
+        a ``Solution``. A solve that fails returns ``converged=False`` with the reason and the
+        best feasible-so-far iterate (never NaN).
+    """
+    opts = options or SolverOptions()
+    sweep, dyn = parse_method(method)
+    if isinstance(u_guess, Solution):
+        u_guess = u_guess.U
+    if u_guess is None:
+        u_guess = np.full((problem.N, problem.nu), 1e-6)
+    U0 = validate(problem, u_guess)
+    hom_seq = opts.homotopy if (fuel_optimal or (fuel_optimal is None and len(opts.homotopy) > 1)) \
+        else opts.homotopy[:1]
+    fuel = len(hom_seq) > 1 or (hom_seq[0][0] > 0)
+    if progress is None and opts.verbose:
+        progress = print
+    t_start = time.perf_counter()
+    deadline = None if opts.time_budget_s is None else t_start + opts.time_budget_s
+    stats = DDPStats()
+    X = problem.rollout(U0)
+    if not np.all(np.isfinite(X)):
+        raise DaddyError("the initial guess propagates to a non-finite state")
+    U = U0
+    best = (X, U)
+    aul_iters = 0
+    history = []
+    converged = True
+    reason = "converged"
+    st = None
+    for i, hom in enumerate(hom_seq):
+        if progress:
+            progress(f"homotopy {i + 1}/{len(hom_seq)}: h = {hom[0]}, delta = {hom[1]}")
+        mult = Multipliers.initial(problem, opts.mu_init)
+        res = aul(problem, X, U, mult, hom, sweep, dyn, opts, stats, deadline, progress)
+        aul_iters += res.iterations
+        st = res.stages
+        X, U = st.X, st.U
+        if np.all(np.isfinite(X)) and np.all(np.isfinite(U)):
+            best = (X, U)
+        history.append({"h": hom[0], "delta": hom[1], "aul_iterations": res.iterations,
+                        "max_violation": res.max_violation, "cost": st.cost,
+                        "converged": res.converged, "reason": res.reason})
+        if not res.converged:
+            converged, reason = False, f"homotopy step {i + 1}: {res.reason}"
+            if res.reason == "time budget exceeded":
+                break
+    t_ddp = time.perf_counter() - t_start
+    X, U = best
+    newton_iters, t_newton = 0, 0.0
+    if polish:
+        t0 = time.perf_counter()
+        pres = newton_polish(problem, X, U, opts, deadline)
+        t_newton = time.perf_counter() - t0
+        newton_iters = pres.iterations
+        if progress:
+            progress(f"newton: {pres.iterations} iterations, max violation {pres.max_violation:.2e}"
+                     f" ({pres.reason})")
+        if pres.improved:
+            X, U = pres.X, pres.U
+        if not pres.converged:
+            converged = False
+            reason = f"newton polishing: {pres.reason}"
+    gmax = total_violation(problem, X, U)
+    if not polish and gmax > opts.tol_aul:
+        converged = False
+    hom_last = hom_seq[-1]
+    gains = backward_sweep(Stages(problem, X, U, Multipliers.initial(problem, opts.mu_init),
+                                  hom_last, opts.eps_da), sweep, max(opts.rho_min, 1e-8)) if st else None
+    units = problem.units
+    m_idx = problem.mass_index
+    final_mass = float(X[-1, m_idx] * units.mu_kg) if m_idx is not None else None
+    propellant = float((X[0, m_idx] - X[-1, m_idx]) * units.mu_kg) if m_idx is not None else None
+    N, nu, nx = problem.N, problem.nu, problem.nx
+    sol = Solution(
+        case=case_name or problem.name, method=method, fuel_optimal=fuel, converged=converged,
+        reason=reason, X=X, U=U, stage_dt=problem.stage_dt.copy(),
+        gains_a=gains.a if gains else np.zeros((N, nu)),
+        gains_b=gains.b if gains else np.zeros((N, nu, nx)),
+        cost=objective(problem, X, U, hom_last), max_violation=gmax, final_mass_kg=final_mass,
+        propellant_kg=propellant, repropagation_miss=repropagation_miss(problem, U),
+        iterations={"homotopy": len(history), "aul": aul_iters, "ddp": stats.iterations,
+                    "newton": newton_iters},
+        runtime_s={"total": time.perf_counter() - t_start, "ddp": t_ddp, "newton": t_newton,
+                   "forward": stats.forward_s, "expansion": stats.expansion_s,
+                   "backward": stats.backward_s},
+        history=history,
+        units={"system": units.name, "lu_km": units.lu_km, "tu_s": units.tu_s,
+               "mu_kg": units.mu_kg, "thrust_unit_n": units.thrust_unit_n},
+        polynomial_share=stats.polynomial_share,
+    )
+    return sol
