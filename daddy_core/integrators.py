@@ -71,7 +71,8 @@ class _Stages:
         if m == 0:
             out = x_raw
         else:
-            acc = np.tensordot(np.asarray(coeffs), self.buf[:m], axes=(0, 0))
+            flat = self.buf[:m].reshape(m, -1)
+            acc = (np.asarray(coeffs) @ flat).reshape(x_raw.shape)
             out = x_raw + acc * h
         return DA(out, self.T) if self.is_da else out
 
