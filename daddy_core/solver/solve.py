@@ -126,13 +126,17 @@ def solve(problem, u_guess=None, method: str = "dyn", fuel_optimal: bool | None 
     converged = True
     reason = "converged"
     st = None
+    mult = Multipliers.initial(problem, opts.mu_init)
     for i, hom in enumerate(hom_seq):
         if progress:
             progress(f"homotopy {i + 1}/{len(hom_seq)}: h = {hom[0]}, delta = {hom[1]}")
-        mult = Multipliers.initial(problem, opts.mu_init)
+        # each homotopy step is warm-started: controls and duals carry over, penalties restart
+        mult.mu[...] = opts.mu_init
+        mult.mu_t[...] = opts.mu_init
         res = aul(problem, X, U, mult, hom, sweep, dyn, opts, stats, deadline, progress)
         aul_iters += res.iterations
         st = res.stages
+        mult = res.mult
         X, U = st.X, st.U
         if np.all(np.isfinite(X)) and np.all(np.isfinite(U)):
             best = (X, U)

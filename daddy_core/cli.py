@@ -1,0 +1,98 @@
+"""Command line: ``daddy solve CASE [...]`` (also ``python -m daddy_core solve ...``).
+
+Exit status 0 when the solve converged, 1 when it did not (with a one-line reason on stderr),
+2 for bad arguments or bad input.
+"""
+from __future__ import annotations
+
+import argparse
+import sys
+
+import numpy as np
+
+from .errors import DaddyError
+from .problem import problem_from_case
+from .problems import list_cases, load_case
+from .solver import METHODS, Solution, case_options, solve
+
+
+def _parser() -> argparse.ArgumentParser:
+    ap = argparse.ArgumentParser(prog="daddy", description="DADDy low-thrust trajectory optimiser")
+    sub = ap.add_subparsers(dest="command", required=True)
+    s = sub.add_parser("solve", help="solve a catalogue case (or a case file)")
+    s.add_argument("case", help=f"case name ({', '.join(list_cases())}) or path to a .json file")
+    s.add_argument("--method", default="dyn", choices=METHODS)
+    g = s.add_mutually_exclusive_group()
+    g.add_argument("--energy", action="store_true", help="energy-optimal only (default for "
+                   "the double integrator)")
+    g.add_argument("--fuel", action="store_true", help="fuel-optimal homotopy (default)")
+    s.add_argument("--no-polish", action="store_true", help="skip the Newton polishing")
+    s.add_argument("--warm-start", metavar="JSON", help="initial controls from a solution file")
+    s.add_argument("--stages", type=int, help="override the stage count N")
+    s.add_argument("--json", metavar="FILE", help="write the solution as JSON")
+    s.add_argument("--npz", metavar="FILE", help="write the solution as NPZ")
+    s.add_argument("--plot", metavar="FILE", help="write a PNG of the trajectory and thrust "
+                   "(needs matplotlib)")
+    s.add_argument("--time-budget", type=float, metavar="S", help="wall-clock budget in seconds")
+    s.add_argument("--quiet", action="store_true", help="no progress lines")
+    sub.add_parser("list", help="list the catalogue cases")
+    return ap
+
+
+def main(argv=None) -> int:
+    args = _parser().parse_args(argv)
+    if args.command == "list":
+        for name in list_cases():
+            c = load_case(name)
+            print(f"{name:16s} {c.description}")
+        return 0
+    try:
+        case = load_case(args.case)
+        fuel = not args.energy and case.system != "double_integrator"
+        if args.fuel:
+            fuel = True
+        problem = problem_from_case(case, stages=args.stages)
+        opts = case_options(case, fuel, time_budget_s=args.time_budget)
+        if args.warm_start:
+            u0 = Solution.from_json(args.warm_start).U
+        else:
+            guess = case.solver.get("u_guess_n", 1e-6)
+            if case.spacecraft is not None:
+                guess = float(case.units.thrust(guess))
+            u0 = np.full((problem.N, problem.nu), guess)
+        progress = None if args.quiet else (lambda line: print(line, flush=True))
+        sol = solve(problem, u0, method=args.method, fuel_optimal=fuel, polish=not args.no_polish,
+                    options=opts, case_name=case.name, progress=progress)
+    except DaddyError as exc:
+        print(f"daddy: error: {exc}", file=sys.stderr)
+        return 2
+    _report(sol)
+    if args.json:
+        sol.to_json(args.json)
+    if args.npz:
+        sol.to_npz(args.npz)
+    if args.plot:
+        from .plotting import plot_solution
+        plot_solution(sol, args.plot)
+    if not sol.converged:
+        print(f"daddy: not converged: {sol.reason}", file=sys.stderr)
+        return 1
+    return 0
+
+
+def _report(sol: Solution) -> None:
+    it = sol.iterations
+    rt = sol.runtime_s
+    print(f"case {sol.case}  method {sol.method}  {'fuel' if sol.fuel_optimal else 'energy'}-optimal"
+          f"  converged {sol.converged} ({sol.reason})")
+    print(f"  cost {sol.cost:.10g}  max violation {sol.max_violation:.2e}  "
+          f"re-propagation miss {sol.repropagation_miss if sol.repropagation_miss is None else f'{sol.repropagation_miss:.2e}'}")
+    if sol.final_mass_kg is not None:
+        print(f"  final mass {sol.final_mass_kg:.3f} kg  propellant {sol.propellant_kg:.3f} kg")
+    print(f"  iterations: homotopy {it['homotopy']}, AUL {it['aul']}, DDP {it['ddp']}, "
+          f"Newton {it['newton']}; polynomial share {sol.polynomial_share:.0%}")
+    print(f"  runtime {rt['total']:.2f} s (DDP {rt['ddp']:.2f} s, Newton {rt['newton']:.2f} s)")
+
+
+if __name__ == "__main__":
+    sys.exit(main())
