@@ -12,6 +12,7 @@ integrate in one call.
 """
 from __future__ import annotations
 
+import math
 from fractions import Fraction as F
 
 import numpy as np
@@ -131,6 +132,8 @@ def rk78(rhs, x, u, t0, dt, tol: float = 1e-13, h0=None, max_steps: int = 10_000
     """
     if not tol > 0:
         raise DaddyError(f"rk78 tol must be > 0, got {tol}")
+    if isinstance(x, np.ndarray) and x.ndim == 1 and np.ndim(dt) == 0 and np.ndim(t0) == 0:
+        return _rk78_single(rhs, x, u, float(t0), float(dt), tol, h0, max_steps, stats)
     x0 = dm.cons(x)
     batch = x0.shape[1:]
     dt = np.broadcast_to(np.asarray(dt, dtype=float), batch).copy()
@@ -169,6 +172,46 @@ def rk78(rhs, x, u, t0, dt, tol: float = 1e-13, h0=None, max_steps: int = 10_000
         fac = np.clip(fac, 0.2, 5.0)
         h = np.where(active, np.abs(hs) * fac, h)
         h = np.where(h > 0, h, np.abs(dt) / 8.0 + 1e-300)
+    if stats is not None:
+        stats["steps"] = n_steps
+        stats["rhs_calls"] = 13 * n_steps
+    return x
+
+
+_RK78_ROWS = [[(j, a) for j, a in enumerate(row) if a != 0.0] for row in RK78_A]
+_RK78_BROW = [(j, b) for j, b in enumerate(RK78_B) if b != 0.0]
+
+
+def _rk78_single(rhs, x, u, t0, dt, tol, h0, max_steps, stats):
+    """RK78 for one float state: same scheme and step control as the batched path, without
+    the batch bookkeeping (the Std/Dyn forward passes integrate one stage at a time)."""
+    t, t_end = t0, t0 + dt
+    direction = 1.0 if dt >= 0 else -1.0
+    h = abs(dt) / 8.0 if h0 is None else abs(float(h0))
+    if h == 0.0:
+        return x
+    n_steps = 0
+    while abs(t_end - t) > 1e-15 * max(1.0, abs(t_end)):
+        n_steps += 1
+        if n_steps > max_steps:
+            raise DaddyError(f"rk78 exceeded max_steps={max_steps} (stiff or singular dynamics?)")
+        hs = min(h, abs(t_end - t)) * direction
+        ks = []
+        for i in range(13):
+            xi = x
+            for j, a in _RK78_ROWS[i]:
+                xi = xi + ks[j] * (a * hs)
+            ks.append(rhs(t + RK78_C[i] * hs, xi, u))
+        err = float(np.max(np.abs((ks[0] + ks[10] - ks[11] - ks[12]) * (RK78_ERR * hs))))
+        if not math.isfinite(err):
+            raise DaddyError("rk78: dynamics returned NaN or inf")
+        if err <= tol:
+            acc = ks[5] * RK78_B[5]
+            for j, b in _RK78_BROW[1:]:
+                acc = acc + ks[j] * b
+            x = x + acc * hs
+            t += hs
+        h = abs(hs) * min(5.0, max(0.2, 0.8 * (tol / max(err, 1e-300)) ** 0.125))
     if stats is not None:
         stats["steps"] = n_steps
         stats["rhs_calls"] = 13 * n_steps

@@ -15,9 +15,13 @@ Z0 = np.concatenate([CASE.x0, [0.05, -0.1, 0.12]])  # a thrusting stage
 
 
 def flow(z, integrator):
+    # floats go through the batched code path (batch of one), exactly as the DA does
+    col = z[:, None]
     if integrator == "rk78":
-        return rk78(RHS, z[:7], z[7:], 0.0, DT, tol=1e-13)
-    return rk4(RHS, z[:7], z[7:], 0.0, DT, steps=20)
+        out = rk78(RHS, col[:7], col[7:], 0.0, np.array([DT]), tol=1e-13)
+    else:
+        out = rk4(RHS, col[:7], col[7:], 0.0, np.array([DT]), steps=20)
+    return out[:, 0]
 
 
 def complex_step_jacobian(z, integrator, h=1e-30):

@@ -122,33 +122,62 @@ def backward_sweep(st: Stages, sweep: str, rho: float) -> Gains | None:
 
 
 # ----------------------------------------------------------------------------- forward passes
-def forward_pass(st: Stages, gains: Gains, alpha: float, dyn: bool):
-    """Roll the feedback law out (Alg. 6 / Alg. 8).
+def forward_pass(st: Stages, gains: Gains, alphas: np.ndarray, dyn: bool):
+    """Roll the feedback law out for several step lengths at once (Alg. 6 / Alg. 8).
 
+    The line-search candidates are propagated together, so each stage's integrations for all
+    of them are one batched integrator call.
+
+    Args:
+        alphas: (A,) step lengths.
     Returns:
-        X* (N+1, nx), U* (N, nu), poly (N,) bool: stage propagated by the stored map,
-        dz (n, N): the stage deviations [dx; du] from the nominal.
+        X* (A, N+1, nx), U* (A, N, nu), poly (A, N) bool: stage propagated by the stored map,
+        dz (A, n, N): the stage deviations [dx; du] from the nominal, ok (A,) bool: finite.
     """
     p = st.problem
-    N, nx = p.N, p.nx
-    X = np.empty((N + 1, nx))
-    U = np.empty((N, p.nu))
-    X[0] = p.x0
-    poly = np.zeros(N, dtype=bool)
-    dz = np.empty((nx + p.nu, N))
+    N, nx, nu = p.N, p.nx, p.nu
+    A = len(alphas)
+    X = np.empty((A, N + 1, nx))
+    U = np.empty((A, N, nu))
+    X[:, 0] = p.x0
+    poly = np.zeros((A, N), dtype=bool)
+    dz = np.empty((A, nx + nu, N))
+    ok = np.ones(A, dtype=bool)
+    T = st.F.T
     for k in range(N):
-        dx = X[k] - st.X[k]
-        du = alpha * gains.a[k] + gains.b[k] @ dx
-        U[k] = st.U[k] + du
-        dz[:nx, k], dz[nx:, k] = dx, du
-        if dyn and np.sqrt(dx @ dx + du @ du) < st.radius[k]:
-            X[k + 1] = da.evaluate(st.F[:, k], dz[:, k])   # eq. 11, first case
-            poly[k] = True
-        else:
-            X[k + 1] = p.step(X[k][:, None], U[k][:, None], p.stage_dt[k:k + 1])[:, 0]
-        if not np.all(np.isfinite(X[k + 1])):
-            raise DaddyError(f"forward pass produced a non-finite state at stage {k}")
-    return X, U, poly, dz
+        dx = X[:, k] - st.X[k]                                       # (A, nx)
+        du = alphas[:, None] * gains.a[k] + dx @ gains.b[k].T        # (A, nu)
+        U[:, k] = st.U[k] + du
+        dz[:, :nx, k], dz[:, nx:, k] = dx, du
+        inside = np.zeros(A, dtype=bool)
+        if dyn:
+            inside = np.sqrt(np.sum(dx * dx, 1) + np.sum(du * du, 1)) < st.radius[k]
+        inside &= ok
+        if np.any(inside):                                           # eq. 11, first case
+            mv = da.monomial_values(dz[inside, :, k].T, T)             # (M, A_in)
+            X[inside, k + 1] = (st.F.c[:, :, k].T @ mv).T
+            poly[inside, k] = True
+        out = np.flatnonzero(~inside & ok)
+        if out.size:
+            X[out, k + 1] = _integrate(p, X[out, k], U[out, k], p.stage_dt[k])
+        bad = ~np.all(np.isfinite(X[:, k + 1]), axis=1)
+        if np.any(bad):
+            ok &= ~bad
+            X[bad, k + 1] = X[bad, k]  # keep the arrays finite; the candidate is discarded
+    return X, U, poly, dz, ok
+
+
+def _integrate(p, X: np.ndarray, U: np.ndarray, dt: float) -> np.ndarray:
+    """Float propagation of B states over one stage, batched; NaN rows where it fails."""
+    B = X.shape[0]
+    try:
+        if B == 1:  # the unbatched float path of the integrator is the fastest for one state
+            return p.step(X[0], U[0], dt)[None]
+        return p.step(X.T, U.T, np.full(B, dt)).T
+    except (DaddyError, FloatingPointError, OverflowError):
+        if B == 1:
+            return np.full_like(X, np.nan)
+        return np.vstack([_integrate(p, X[i:i + 1], U[i:i + 1], dt) for i in range(B)])
 
 
 def new_maps(st: Stages, X, U, poly, dz, dyn: bool):
@@ -173,6 +202,9 @@ class DDPResult:
     converged: bool
     iterations: int
     reason: str
+
+
+_LS_BATCH = 2  # line-search step lengths propagated together
 
 
 def _raise_rho(rho: float, opts) -> float:
@@ -208,23 +240,27 @@ def ddp(st: Stages, sweep: str, dyn: bool, opts, stats: DDPStats, deadline: floa
                 return DDPResult(st, False, it, "Q_uu not positive definite up to rho_max")
             continue
         accepted = False
-        a = alpha if dyn else 1.0
+        a0 = alpha if dyn else 1.0
         t0 = time.perf_counter()
-        for _ in range(opts.ls_max_halvings + 1):
-            try:
-                X, U, poly, dz = forward_pass(st, gains, a, dyn)
-                Jn = augmented_cost(p, X, U, st.mult, st.hom)
-            except (DaddyError, FloatingPointError, OverflowError):
-                a *= opts.ls_shrink
-                continue
-            expected = -(a * gains.dv1 + a * a * gains.dv2)
-            actual = J - Jn
-            if np.isfinite(Jn) and (
-                    (expected > 0 and opts.ls_min_ratio < actual / expected < opts.ls_max_ratio)
-                    or (expected <= 1e-15 * max(1.0, abs(J)) and actual >= 0)):
-                accepted = True
-                break
-            a *= opts.ls_shrink
+        tried = 0
+        while not accepted and tried <= opts.ls_max_halvings:
+            # the next few halvings of the step, propagated together
+            n_try = min(_LS_BATCH, opts.ls_max_halvings + 1 - tried)
+            alphas = a0 * opts.ls_shrink ** np.arange(tried, tried + n_try)
+            tried += n_try
+            Xs, Us, polys, dzs, ok = forward_pass(st, gains, alphas, dyn)
+            for j, a in enumerate(alphas):
+                if not ok[j]:
+                    continue
+                Jn = augmented_cost(p, Xs[j], Us[j], st.mult, st.hom)
+                expected = -(a * gains.dv1 + a * a * gains.dv2)
+                actual = J - Jn
+                if np.isfinite(Jn) and (
+                        (expected > 0 and opts.ls_min_ratio < actual / expected < opts.ls_max_ratio)
+                        or (expected <= 1e-15 * max(1.0, abs(J)) and actual >= 0)):
+                    accepted = True
+                    X, U, poly, dz = Xs[j], Us[j], polys[j], dzs[j]
+                    break
         stats.forward_s += time.perf_counter() - t0
         if not accepted:
             rho = _raise_rho(rho, opts)
