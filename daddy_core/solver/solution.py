@@ -100,8 +100,9 @@ class Solution:
 
     @classmethod
     def from_json(cls, path_or_text: str | Path) -> "Solution":
-        p = Path(path_or_text)
-        text = p.read_text() if p.exists() else str(path_or_text)
+        text = str(path_or_text)
+        if not text.lstrip().startswith("{"):
+            text = Path(text).read_text()
         return cls.from_dict(json.loads(text))
 
     def to_npz(self, path: str | Path) -> None:

@@ -1,0 +1,156 @@
+"""The DADDy solver on the paper's validation cases, and its input checks."""
+import json
+import pathlib
+
+import numpy as np
+import pytest
+
+from daddy_core.errors import DaddyError
+from daddy_core.problem import Problem, problem_from_case
+from daddy_core.problems import load_case
+from daddy_core.solver import METHODS, Solution, SolverOptions, case_options, solve
+
+DI = load_case("double_integrator")
+# copies of ../shared/reference (independent CasADi + IPOPT solutions), kept with the tests
+DATA = pathlib.Path(__file__).with_name("data")
+
+
+def solve_case(name, method="dyn", fuel=False, **kw):
+    case = load_case(name)
+    prob = problem_from_case(case)
+    u0 = np.full((prob.N, prob.nu), float(case.units.thrust(case.solver["u_guess_n"]))
+                 if case.spacecraft else case.solver["u_guess_n"])
+    return solve(prob, u0, method=method, fuel_optimal=fuel, options=case_options(case, fuel, **kw))
+
+
+def di_closed_form():
+    """Minimum of sum |u_k|^2 s.t. Euler double integrator reaches r_t: a least-norm problem."""
+    N = DI.stages
+    x0, xt = DI.x0, DI.x_target
+    # r_N = r0 + N v0 + sum_k (N - 1 - k) u_k  (dt = 1)
+    w = np.array([N - 1 - k for k in range(N)], dtype=float)
+    rhs = xt[:3] - x0[:3] - N * x0[3:]
+    # per axis: min |u|^2 s.t. w.u = rhs  ->  u = w rhs / |w|^2
+    return float(np.sum(rhs ** 2) / (w @ w))
+
+
+@pytest.mark.parametrize("method", METHODS)
+def test_double_integrator_all_methods(method):
+    sol = solve_case("double_integrator", method)
+    assert sol.converged, sol.reason
+    assert sol.cost == pytest.approx(1.1273, abs=5e-5)          # paper Table 2
+    assert sol.cost == pytest.approx(di_closed_form(), rel=1e-9)
+    assert sol.max_violation <= 1e-12
+    assert sol.repropagation_miss <= 1e-12
+
+
+def test_earth_mars_energy_dyn_matches_reference_oracle():
+    sol = solve_case("earth_mars", "dyn")
+    assert sol.converged, sol.reason
+    assert sol.max_violation <= 1e-10
+    assert sol.final_mass_kg == pytest.approx(556.413, abs=0.05)  # C++ reference / CasADi 556.41
+    assert sol.repropagation_miss < 1e-8
+    ref = np.loadtxt(DATA / "earth_mars_energy__cylindrical.csv", delimiter=",", max_rows=40)
+    thrust = np.linalg.norm(sol.U_newton, axis=1)
+    # single optimum: the thrust profile agrees with the independent direct-transcription solve
+    assert np.max(np.abs(thrust - ref[:, 12])) < 0.02
+    assert np.all(thrust <= 0.5 * (1 + 1e-9))
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("method", [m for m in METHODS if m != "dyn"])
+def test_earth_mars_energy_other_methods(method):
+    sol = solve_case("earth_mars", method)
+    assert sol.converged, sol.reason
+    assert sol.final_mass_kg == pytest.approx(556.413, abs=0.05)
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("method", ["std", "dyn"])
+def test_earth_mars_fuel(method):
+    sol = solve_case("earth_mars", method, fuel=True)
+    assert sol.converged, sol.reason
+    assert 603.25 <= sol.final_mass_kg <= 603.56
+    assert sol.max_violation <= 1e-10
+    assert sol.repropagation_miss < 1e-8
+
+
+@pytest.mark.slow
+def test_halo_fuel():
+    sol = solve_case("halo_l2_l1", "dyn", fuel=True)
+    assert sol.converged, sol.reason
+    assert 973.3 <= sol.final_mass_kg <= 981.5
+    assert sol.max_violation <= 1e-10
+
+
+@pytest.mark.slow
+def test_dro_fuel():
+    sol = solve_case("dro_dro", "dyn", fuel=True)
+    assert sol.converged, sol.reason
+    assert sol.final_mass_kg == pytest.approx(996.32, abs=0.3)
+    assert sol.max_violation <= 1e-10
+
+
+def test_solution_round_trips_and_warm_starts(tmp_path):
+    sol = solve_case("double_integrator")
+    again = Solution.from_json(sol.to_json())
+    np.testing.assert_array_equal(again.U, sol.U)
+    assert again.iterations == sol.iterations
+    p = tmp_path / "s.npz"
+    sol.to_npz(p)
+    np.testing.assert_array_equal(Solution.from_npz(p).gains_b, sol.gains_b)
+    d = json.loads(sol.to_json())
+    for key in ("case", "method", "fuel_optimal", "converged", "final_mass_kg", "propellant_kg",
+                "cost", "max_violation", "repropagation_miss", "iterations", "runtime_s", "X", "U"):
+        assert key in d
+    prob = problem_from_case(DI)
+    warm = solve(prob, sol, method="dyn", options=case_options(DI, False))
+    assert warm.converged and warm.iterations["ddp"] <= sol.iterations["ddp"]
+    assert warm.cost == pytest.approx(sol.cost, rel=1e-9)
+
+
+def test_feedback_gains_shape():
+    sol = solve_case("double_integrator")
+    assert sol.gains_a.shape == (11, 3) and sol.gains_b.shape == (11, 3, 6)
+    assert np.all(np.isfinite(sol.gains_b))
+
+
+# ------------------------------------------------------------------------------- bad input
+def test_bad_guess_shapes_and_values():
+    prob = problem_from_case(DI)
+    with pytest.raises(DaddyError, match="u_guess must have shape"):
+        solve(prob, np.zeros((3, 3)))
+    with pytest.raises(DaddyError, match="u_guess contains NaN"):
+        solve(prob, np.full((11, 3), np.nan))
+    with pytest.raises(DaddyError, match="method"):
+        solve(prob, method="newton")
+
+
+def test_bad_problem_fields():
+    prob = problem_from_case(DI)
+    with pytest.raises(DaddyError, match="stage_dt"):
+        Problem(name="x", x0=prob.x0, x_target=prob.x_target, stage_dt=np.array([1.0, -1.0]),
+                step=prob.step, stage_cost=prob.stage_cost, terminal_cost=prob.terminal_cost)
+    with pytest.raises(DaddyError, match="x_target"):
+        Problem(name="x", x0=prob.x0, x_target=np.zeros(2), stage_dt=np.ones(3), step=prob.step,
+                stage_cost=prob.stage_cost, terminal_cost=prob.terminal_cost)
+    nan_cost = Problem(name="x", x0=prob.x0, x_target=prob.x_target, stage_dt=np.ones(11),
+                       step=prob.step, stage_cost=lambda x, u, dt, hom: u[0] * np.nan,
+                       terminal_cost=prob.terminal_cost)
+    with pytest.raises(DaddyError, match="stage_cost returned NaN"):
+        solve(nan_cost, np.zeros((11, 3)))
+
+
+def test_infeasible_mass_bound():
+    case = load_case("earth_mars")
+    prob = problem_from_case(case)
+    heavy_dry = prob.with_x0(np.concatenate([prob.x0[:6], [0.4]]))
+    with pytest.raises(DaddyError, match="dry mass"):
+        solve(heavy_dry, np.zeros((40, 3)))
+
+
+def test_options_are_validated():
+    with pytest.raises(DaddyError, match="tol_ddp"):
+        SolverOptions(tol_ddp=-1.0)
+    with pytest.raises(DaddyError, match="homotopy"):
+        SolverOptions(homotopy=((2.0, 0.1),))
