@@ -1,0 +1,315 @@
+"""Closed-loop GNC demo: a truth simulator and the guidance node over real ROS 2 topics.
+
+    gnc_demo [--case halo_l2_l1|earth_mars] [--replan-every K] [--plot FILE] [--seed S]
+    gnc_demo --runs 100            # Monte Carlo, same guidance logic called directly (no graph)
+
+The simulator publishes noisy state and mass estimates, asks for a re-optimisation every K
+stages (and on every sub-step of the final stages), applies the schedule it receives with
+execution errors, and reports the terminal miss, the propellant against the open-loop optimum,
+the number of re-optimisations and their latency.
+"""
+from __future__ import annotations
+
+import argparse
+import os
+import statistics
+import threading
+import time
+from pathlib import Path
+
+import numpy as np
+
+from .planner import GuidancePlanner, InputRejected
+from .sim import Errors, TruthSim
+
+T0_S = 1000.0  # mission clock at departure [s]; any positive epoch works
+PLANS_DIR = Path(__file__).with_name("plans")
+
+
+class DirectLink:
+    """Guidance called in-process (Monte Carlo mode)."""
+
+    def __init__(self, planner: GuidancePlanner):
+        self.planner = planner
+
+    def replan(self, pos, vel, mass, t_s, rid):
+        t0 = time.perf_counter()
+        try:
+            out = self.planner.replan(pos, vel, mass, t_s, rid, now_s=t_s)
+            level = out.level
+        except InputRejected as exc:
+            level = f"ERROR {exc}"
+        return level, time.perf_counter() - t0
+
+    def thrust_at(self, t_s, pos, vel, mass):
+        plan = self.planner.plan
+        return plan.thrust_at(t_s) if plan else np.zeros(3)
+
+
+class RosLink:
+    """Guidance over ROS 2 topics: the GNC side of the loop (estimates and requests out,
+    schedules and diagnostics in)."""
+
+    def __init__(self, frame_id: str, timeout_s: float):
+        import rclpy
+        from diagnostic_msgs.msg import DiagnosticArray
+        from geometry_msgs.msg import InertiaStamped
+        from nav_msgs.msg import Odometry
+        from rclpy.node import Node
+        from std_msgs.msg import Header
+        from trajectory_msgs.msg import JointTrajectory
+
+        from . import conversions as cv
+        from .guidance_node import LATCHED, RELIABLE
+
+        self.cv, self.Header, self.InertiaStamped = cv, Header, InertiaStamped
+        self.node = Node("daddy_gnc_sim")
+        self.frame_id = frame_id
+        self.timeout_s = timeout_s
+        self.pub_state = self.node.create_publisher(Odometry, "state_estimate", RELIABLE)
+        self.pub_mass = self.node.create_publisher(InertiaStamped, "mass_estimate", RELIABLE)
+        self.pub_req = self.node.create_publisher(Header, "replan_request", RELIABLE)
+        self.schedule = None
+        self.diags = {}
+        self.cond = threading.Condition()
+        self.node.create_subscription(JointTrajectory, "control_schedule", self._on_schedule, LATCHED)
+        self.node.create_subscription(DiagnosticArray, "/diagnostics", self._on_diag, RELIABLE)
+        del rclpy
+
+    def _on_schedule(self, msg):
+        t, u = self.cv.joint_trajectory_to_schedule(msg)
+        with self.cond:
+            self.schedule = (self.cv.stamp_to_s(msg.header.stamp), t, u)
+            self.cond.notify_all()
+
+    def _on_diag(self, msg):
+        with self.cond:
+            for st in msg.status:
+                vals = {kv.key: kv.value for kv in st.values}
+                if "request_id" in vals:
+                    self.diags[vals["request_id"]] = (st.level, st.message)
+            self.cond.notify_all()
+
+    def publish_estimate(self, pos, vel, mass, t_s):
+        m = self.InertiaStamped()
+        m.header = self.Header(stamp=self.cv.s_to_stamp(t_s), frame_id=self.frame_id)
+        m.inertia.m = float(mass)
+        self.pub_mass.publish(m)
+        self.pub_state.publish(self.cv.state_to_odometry(pos, vel, t_s, self.frame_id))
+
+    def wait_connected(self, timeout_s=10.0):
+        end = time.monotonic() + timeout_s
+        while time.monotonic() < end:
+            if (self.pub_state.get_subscription_count() and self.pub_req.get_subscription_count()
+                    and self.pub_mass.get_subscription_count()):
+                return True
+            time.sleep(0.05)
+        return False
+
+    def replan(self, pos, vel, mass, t_s, rid):
+        self.publish_estimate(pos, vel, mass, t_s)
+        time.sleep(0.02)  # let the estimate arrive before the request (same reliable link)
+        t0 = time.perf_counter()
+        self.pub_req.publish(self.Header(stamp=self.cv.s_to_stamp(t_s), frame_id=rid))
+        end = time.monotonic() + self.timeout_s
+        with self.cond:
+            while rid not in self.diags and time.monotonic() < end:
+                self.cond.wait(0.05)
+            level = self.diags.pop(rid, (None, "timeout"))
+        # wait for the schedule of this request (latched, stamped with the estimate time)
+        with self.cond:
+            while (self.schedule is None or self.schedule[0] < t_s - 1e-3) and \
+                    time.monotonic() < end and level[0] == 0:
+                self.cond.wait(0.05)
+        names = {0: "OK", 1: "WARN", 2: "ERROR"}
+        return names.get(level[0], f"ERROR {level[1]}"), time.perf_counter() - t0
+
+    def thrust_at(self, t_s, pos, vel, mass):
+        with self.cond:
+            sched = self.schedule
+        if sched is None:
+            return np.zeros(3)
+        stamp, starts, u = sched
+        rel = t_s - stamp
+        k = int(np.searchsorted(starts, rel + 1e-6, side="right")) - 1
+        return u[k].copy() if 0 <= k < len(u) else np.zeros(3)
+
+
+def fly(link, sim: TruthSim, planner: GuidancePlanner, replan_every: int, substeps: int,
+        final_stages: int, progress=None) -> dict:
+    """Run the closed loop to the end of the transfer; returns the figures of the run."""
+    N = planner.base_problem.N
+    dt_stage = sim.tof_s / N
+    step = dt_stage / substeps
+    latencies, levels, flown = [], [], [sim.truth_si()[0]]
+    n_steps = N * substeps
+    for j in range(n_steps):
+        t = sim.t_s
+        stage = j // substeps
+        pos, vel, mass = sim.estimate_si()
+        periodic = j % (replan_every * substeps) == 0 and j > 0
+        final = stage >= N - final_stages
+        if periodic or final:
+            level, lat = link.replan(pos, vel, mass, t, f"r{j}")
+            latencies.append(lat)
+            levels.append(level)
+            if progress:
+                progress(f"  t = {(t - sim.t0_s) / 86400:7.3f} d  stage {stage:3d}/{N}  replan "
+                         f"{level:5s} {lat * 1e3:8.1f} ms")
+        elif isinstance(link, RosLink):
+            link.publish_estimate(pos, vel, mass, t)
+        u = link.thrust_at(t, pos, vel, mass)
+        sim.apply(u, step)
+        flown.append(sim.truth_si()[0])
+    miss_r, miss_v = sim.miss()
+    m_final = sim.truth_si()[2]
+    return {"miss_km": miss_r / 1e3, "miss_cm_s": miss_v * 100, "final_mass_kg": m_final,
+            "replans": len(latencies), "latency_ms": [1e3 * x for x in latencies],
+            "levels": levels, "flown_m": np.array(flown)}
+
+
+def nominal_planner(case: str, time_budget_s: float) -> tuple[GuidancePlanner, float]:
+    """A planner holding the open-loop optimum at T0 (bundled plan or a cold solve)."""
+    planner = GuidancePlanner(case, time_budget_s=time_budget_s)
+    plan_file = PLANS_DIR / f"{case}_fuel.json"
+    sim = TruthSim(case, t0_s=T0_S)
+    if plan_file.exists():
+        plan = planner.load_plan(plan_file, T0_S)
+    else:
+        p, v, m = sim.truth_si()
+        out = planner.replan(p, v, m, T0_S, "nominal", cold=True)
+        if not out.ok:
+            raise SystemExit(f"open-loop solve failed: {out.reason}")
+        plan = out.plan
+    return planner, float(plan.states_si[-1, 6])
+
+
+def summarise(runs: list[dict], m_open: float, m0: float) -> dict:
+    prop_open = m0 - m_open
+    ok = [r for r in runs if r["miss_km"] <= 1.0 and r["miss_cm_s"] <= 1.0
+          and abs((m0 - r["final_mass_kg"]) - prop_open) <= 0.01 * prop_open]
+    lat = [x for r in runs for x in r["latency_ms"]]
+    return {"runs": len(runs), "success": len(ok), "success_rate": len(ok) / max(len(runs), 1),
+            "miss_km_median": statistics.median(r["miss_km"] for r in runs),
+            "miss_km_max": max(r["miss_km"] for r in runs),
+            "miss_cm_s_median": statistics.median(r["miss_cm_s"] for r in runs),
+            "miss_cm_s_max": max(r["miss_cm_s"] for r in runs),
+            "propellant_open_loop_kg": prop_open,
+            "propellant_median_kg": statistics.median(m0 - r["final_mass_kg"] for r in runs),
+            "latency_ms_median": statistics.median(lat) if lat else float("nan"),
+            "latency_ms_max": max(lat) if lat else float("nan"),
+            "replans_per_run": statistics.mean(r["replans"] for r in runs)}
+
+
+def main(argv=None) -> int:
+    ap = argparse.ArgumentParser(prog="gnc_demo", description=__doc__.splitlines()[0])
+    ap.add_argument("--case", default="halo_l2_l1", choices=["halo_l2_l1", "earth_mars", "dro_dro"])
+    ap.add_argument("--runs", type=int, default=0, help="Monte Carlo runs without the ROS graph")
+    ap.add_argument("--seed", type=int, default=1)
+    ap.add_argument("--replan-every", type=int, default=10, help="stages between re-optimisations")
+    ap.add_argument("--substeps", type=int, default=2, help="simulation steps per stage")
+    ap.add_argument("--final-stages", type=int, default=2,
+                    help="re-optimise at every sub-step of the last stages")
+    ap.add_argument("--time-budget", type=float, default=60.0)
+    ap.add_argument("--no-errors", action="store_true", help="perfect navigation and execution")
+    ap.add_argument("--plot", default="out/gnc_demo.png", help="PNG of flown vs planned")
+    args = ap.parse_args(argv)
+    os.environ.setdefault("ROS_AUTOMATIC_DISCOVERY_RANGE", "LOCALHOST")
+    errors = Errors(0, 0, 0, 0) if args.no_errors else Errors()
+    print(f"closed-loop GNC demo: {args.case}, navigation errors {errors.nav_pos_m} m / "
+          f"{errors.nav_vel_m_s * 1e3} mm/s, execution errors {errors.exec_mag:.0%} / "
+          f"{errors.exec_point_deg} deg (1 sigma)", flush=True)
+    planner, m_open = nominal_planner(args.case, args.time_budget)
+    m0 = planner.case.spacecraft.wet_mass_kg
+    print(f"open-loop optimum: final mass {m_open:.3f} kg", flush=True)
+    if args.runs:
+        runs = []
+        for i in range(args.runs):
+            seed = args.seed + i
+            pl, _ = nominal_planner(args.case, args.time_budget)
+            sim = TruthSim(args.case, errors, seed=seed, t0_s=T0_S)
+            r = fly(DirectLink(pl), sim, pl, args.replan_every, args.substeps, args.final_stages)
+            runs.append(r)
+            print(f"run {i + 1:3d} seed {seed}: miss {r['miss_km']:.3f} km {r['miss_cm_s']:.2f} cm/s"
+                  f", final mass {r['final_mass_kg']:.3f} kg, {r['replans']} replans", flush=True)
+        _print_summary(summarise(runs, m_open, m0))
+        return 0
+    return _ros_demo(args, planner, errors, m_open, m0)
+
+
+def _ros_demo(args, planner, errors, m_open, m0) -> int:
+    import rclpy
+    from rclpy.executors import MultiThreadedExecutor
+    from rclpy.signals import SignalHandlerOptions
+
+    from .guidance_node import GuidanceNode
+    rclpy.init(signal_handler_options=SignalHandlerOptions.NO)
+    guidance = GuidanceNode(scenario=args.case, time_budget_s=args.time_budget)
+    guidance.planner.set_plan(planner.plan)      # the nominal plan, anchored at T0
+    link = RosLink(guidance.frame_id, timeout_s=3 * args.time_budget + 30)
+    executor = MultiThreadedExecutor(num_threads=4)
+    executor.add_node(guidance)
+    executor.add_node(link.node)
+    spin = threading.Thread(target=executor.spin, daemon=True)
+    spin.start()
+    try:
+        if not link.wait_connected():
+            print("ROS graph did not connect on loopback", flush=True)
+            return 1
+        sim = TruthSim(args.case, errors, seed=args.seed, t0_s=T0_S)
+        r = fly(link, sim, guidance.planner, args.replan_every, args.substeps, args.final_stages,
+                progress=lambda s: print(s, flush=True))
+    finally:
+        guidance.stop()
+        executor.shutdown(timeout_sec=2.0)
+        guidance.destroy_node()
+        link.node.destroy_node()
+        rclpy.try_shutdown()
+    s = summarise([r], m_open, m0)
+    _print_summary(s)
+    print(f"re-optimisations: {r['replans']} ({sum(1 for x in r['levels'] if x == 'OK')} OK), "
+          f"coalesced triggers: {guidance.coalesced}")
+    if args.plot:
+        try:
+            _plot(r, planner, args.plot)
+            print(f"plot: {args.plot}")
+        except ImportError:
+            print("plot skipped: matplotlib not installed (optional extra)")
+    return 0
+
+
+def _print_summary(s: dict) -> None:
+    print(f"terminal miss: {s['miss_km_median']:.3f} km (max {s['miss_km_max']:.3f}), "
+          f"{s['miss_cm_s_median']:.3f} cm/s (max {s['miss_cm_s_max']:.3f})")
+    print(f"propellant: {s['propellant_median_kg']:.3f} kg vs open-loop optimum "
+          f"{s['propellant_open_loop_kg']:.3f} kg")
+    print(f"re-optimisation latency: median {s['latency_ms_median']:.1f} ms, max "
+          f"{s['latency_ms_max']:.1f} ms; {s['replans_per_run']:.1f} per run")
+    print(f"success (<= 1 km, <= 1 cm/s, propellant within 1 %): {s['success']}/{s['runs']} "
+          f"({s['success_rate']:.0%})")
+
+
+def _plot(r, planner, path):
+    import matplotlib
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+    Path(path).parent.mkdir(parents=True, exist_ok=True)
+    plan = planner.plan
+    fig, (a1, a2) = plt.subplots(1, 2, figsize=(11, 4.5))
+    f = r["flown_m"] / 1e3
+    a1.plot(f[:, 0], f[:, 1], label="flown")
+    p = plan.states_si[:, :3] / 1e3
+    a1.plot(p[:, 0], p[:, 1], "--", label="last plan")
+    a1.set_xlabel("x [km]")
+    a1.set_ylabel("y [km]")
+    a1.legend()
+    a2.step(plan.stage_start_s / 86400, np.linalg.norm(plan.thrust_n, axis=1), where="post")
+    a2.set_xlabel("time since last plan epoch [d]")
+    a2.set_ylabel("thrust [N]")
+    fig.tight_layout()
+    fig.savefig(path, dpi=110)
+    plt.close(fig)
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())

@@ -1,0 +1,287 @@
+"""The rclpy guidance node ``daddy_guidance``: a thin layer over GuidancePlanner.
+
+Callbacks only translate messages; re-optimisations run on a worker thread so subscriptions keep
+being served, and triggers arriving during a solve are coalesced into one follow-up solve on the
+newest state. See msg_docs/ for the interface contract.
+"""
+from __future__ import annotations
+
+import os
+import signal
+import threading
+import time
+from pathlib import Path
+
+import rclpy
+from diagnostic_msgs.msg import DiagnosticArray
+from geometry_msgs.msg import InertiaStamped, Vector3Stamped
+from nav_msgs.msg import Odometry
+from nav_msgs.msg import Path as PathMsg
+from rcl_interfaces.msg import ParameterDescriptor, SetParametersResult
+from rclpy.callback_groups import MutuallyExclusiveCallbackGroup, ReentrantCallbackGroup
+from rclpy.executors import MultiThreadedExecutor
+from rclpy.node import Node
+from rclpy.qos import (DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy,
+                       qos_profile_sensor_data)
+from rclpy.signals import SignalHandlerOptions
+from std_msgs.msg import Header
+from std_srvs.srv import Trigger
+from trajectory_msgs.msg import JointTrajectory
+
+from daddy_core.solver import METHODS
+
+from . import conversions as cv
+from .planner import GuidancePlanner, InputRejected
+
+LATCHED = QoSProfile(depth=1, reliability=ReliabilityPolicy.RELIABLE,
+                     durability=DurabilityPolicy.TRANSIENT_LOCAL, history=HistoryPolicy.KEEP_LAST)
+RELIABLE = QoSProfile(depth=10, reliability=ReliabilityPolicy.RELIABLE,
+                      history=HistoryPolicy.KEEP_LAST)
+
+PARAMETERS = {  # name: (default, description)
+    "scenario": ("halo_l2_l1", "catalogue case name or path to a case .json file"),
+    "method": ("dyn", f"DDP method, one of {', '.join(METHODS)}"),
+    "polish": (True, "Newton polishing after each re-optimisation"),
+    "fuel_optimal": (True, "fuel-optimal cost (else energy-optimal)"),
+    "stages": (0, "stage count of the scenario (0: the case's own)"),
+    "tol_aul": (0.0, "augmented-Lagrangian tolerance (0: the case's own)"),
+    "tol_newton": (0.0, "Newton polishing tolerance (0: the case's own)"),
+    "time_budget_s": (60.0, "wall-clock budget of one re-optimisation [s]"),
+    "staleness_s": (600.0, "estimates older than this relative to the request are rejected [s]"),
+    "frame_id": ("earth_moon_rotating", "frame of state estimates and thrust"),
+    "plan_file": ("", "nominal plan (solution JSON) adopted at the first estimate; empty: the "
+                      "bundled nominal of the scenario if any, else a cold solve on request"),
+    "state_topic": ("state_estimate", "nav_msgs/Odometry input"),
+    "mass_topic": ("mass_estimate", "geometry_msgs/InertiaStamped input (kg)"),
+    "request_topic": ("replan_request", "std_msgs/Header input: frame_id = request id"),
+    "schedule_topic": ("control_schedule", "trajectory_msgs/JointTrajectory output (N)"),
+    "thrust_topic": ("thrust_command", "geometry_msgs/Vector3Stamped output (N)"),
+    "path_topic": ("planned_path", "nav_msgs/Path output (m)"),
+}
+PLANS_DIR = Path(__file__).with_name("plans")
+
+
+class GuidanceNode(Node):
+    def __init__(self, **overrides):
+        super().__init__("daddy_guidance")
+        for name, (default, text) in PARAMETERS.items():
+            self.declare_parameter(name, overrides.get(name, default),
+                                   ParameterDescriptor(description=text))
+        self.add_on_set_parameters_callback(self._on_set_parameters)
+        g = lambda n: self.get_parameter(n).value  # noqa: E731
+        self.frame_id = g("frame_id")
+        self.planner = GuidancePlanner(
+            scenario=g("scenario"), method=g("method"), polish=g("polish"),
+            fuel_optimal=g("fuel_optimal"), stages=g("stages"), time_budget_s=g("time_budget_s"),
+            staleness_s=g("staleness_s"), tol_aul=g("tol_aul") or None,
+            tol_newton=g("tol_newton") or None)
+        self.plan_file = g("plan_file") or self._bundled_plan()
+        self._lock = threading.Lock()
+        self._wake = threading.Condition(self._lock)
+        self._state = None          # (pos, vel, stamp)
+        self._mass = None
+        self._pending = None        # (request_id, request_stamp) awaiting a solve
+        self._busy = False
+        self._n_started = 0         # solves started / finished (sequential, one worker)
+        self._n_finished = 0
+        self._last = ("ERROR", "no solve yet", False)   # (level, reason, new plan stored)
+        self._stop = False
+        self.replans = 0
+        self.coalesced = 0
+
+        sub_group = MutuallyExclusiveCallbackGroup()
+        self.create_subscription(Odometry, g("state_topic"), self._on_state,
+                                 qos_profile_sensor_data, callback_group=sub_group)
+        self.create_subscription(InertiaStamped, g("mass_topic"), self._on_mass,
+                                 qos_profile_sensor_data, callback_group=sub_group)
+        self.create_subscription(Header, g("request_topic"), self._on_request, RELIABLE,
+                                 callback_group=sub_group)
+        self.create_service(Trigger, "~/replan", self._on_service,
+                            callback_group=ReentrantCallbackGroup())
+        self.pub_schedule = self.create_publisher(JointTrajectory, g("schedule_topic"), LATCHED)
+        self.pub_path = self.create_publisher(PathMsg, g("path_topic"), LATCHED)
+        self.pub_thrust = self.create_publisher(Vector3Stamped, g("thrust_topic"), RELIABLE)
+        self.pub_diag = self.create_publisher(DiagnosticArray, "/diagnostics", RELIABLE)
+        self._worker = threading.Thread(target=self._work, name="daddy_replan", daemon=True)
+        self._worker.start()
+        self.get_logger().info(f"daddy_guidance ready: scenario {self.planner.case.name}, "
+                               f"method {self.planner.method}, frame {self.frame_id}")
+
+    # ------------------------------------------------------------------ parameters
+    def _bundled_plan(self) -> str:
+        kind = "fuel" if self.planner.fuel_optimal else "energy"
+        p = PLANS_DIR / f"{self.planner.case.name}_{kind}.json"
+        return str(p) if p.exists() and not self.get_parameter("stages").value else ""
+
+    def _on_set_parameters(self, params):
+        for p in params:
+            if p.name == "time_budget_s":
+                if not isinstance(p.value, float) or not p.value > 0:
+                    return SetParametersResult(successful=False,
+                                               reason="time_budget_s must be a positive float")
+                self.planner.time_budget_s = p.value
+                self.planner.options = self.planner.options.with_(time_budget_s=p.value)
+                self.planner.replan_options = self.planner.replan_options.with_(time_budget_s=p.value)
+            elif p.name == "staleness_s":
+                if not isinstance(p.value, float) or not p.value > 0:
+                    return SetParametersResult(successful=False,
+                                               reason="staleness_s must be a positive float")
+                self.planner.staleness_s = p.value
+            elif p.name in PARAMETERS and self.has_parameter(p.name):
+                return SetParametersResult(successful=False,
+                                           reason=f"{p.name} is read-only after start-up")
+        return SetParametersResult(successful=True)
+
+    # ------------------------------------------------------------------ inputs
+    def _on_state(self, msg: Odometry):
+        pos, vel, stamp, frame = cv.odometry_to_state(msg)
+        if frame != self.frame_id:
+            self._diag("ERROR", f"state_estimate.header.frame_id {frame!r} is not {self.frame_id!r}",
+                       {"field": "header.frame_id"}, stamp)
+            return
+        with self._lock:
+            self._state = (pos, vel, stamp)
+            mass = self._mass
+        plan = self.planner.plan
+        if plan is None and self.plan_file and mass is not None:
+            try:
+                plan = self.planner.load_plan(self.plan_file, stamp)
+                self._publish_plan(plan, stamp)
+                self._diag("OK", f"adopted nominal plan {Path(self.plan_file).name}",
+                           {"request_id": "nominal"}, stamp)
+            except Exception as exc:
+                self._diag("ERROR", f"cannot load plan_file: {exc}", {}, stamp)
+                self.plan_file = ""
+        if plan is not None:
+            self.pub_thrust.publish(cv.thrust_command(plan.thrust_at(stamp), stamp, self.frame_id))
+
+    def _on_mass(self, msg: InertiaStamped):
+        m = float(msg.inertia.m)
+        with self._lock:
+            self._mass = m
+
+    def _on_request(self, msg: Header):
+        self._enqueue(msg.frame_id or "topic", cv.stamp_to_s(msg.stamp))
+
+    def _enqueue(self, request_id: str, stamp_s: float | None) -> int:
+        """Queue a re-optimisation; returns the number of the solve that will serve it."""
+        with self._lock:
+            if self._pending is not None or self._busy:
+                self.coalesced += 1
+            self._pending = (request_id, stamp_s)
+            self._wake.notify()
+            return self._n_started + 1
+
+    def _on_service(self, request, response):
+        target = self._enqueue(f"service-{time.monotonic_ns()}", None)
+        deadline = time.monotonic() + self.planner.time_budget_s * 3 + 10
+        with self._lock:
+            # the next solve to start absorbs this request (coalescing); wait for it to finish
+            while self._n_finished < target and time.monotonic() < deadline and not self._stop:
+                self._wake.wait(0.1)
+            done = self._n_finished >= target
+            level, reason, stored = self._last
+        response.success = done and stored and level != "ERROR"
+        response.message = f"{level}: {reason}" if done else "timed out waiting for the solve"
+        return response
+
+    # ------------------------------------------------------------------ worker
+    def _work(self):
+        while True:
+            with self._lock:
+                while self._pending is None and not self._stop:
+                    self._wake.wait(0.2)
+                if self._stop:
+                    return
+                request_id, request_stamp = self._pending
+                self._pending = None
+                self._busy = True
+                self._n_started += 1
+                state, mass = self._state, self._mass
+            try:
+                self._replan_once(request_id, request_stamp, state, mass)
+            except Exception as exc:  # never let the worker die
+                self._finish(request_id, None, "ERROR", f"internal error: {exc!r}", None)
+            finally:
+                with self._lock:
+                    self._busy = False
+                    self._n_finished += 1
+                    self._wake.notify_all()
+
+    def _replan_once(self, request_id, request_stamp, state, mass):
+        now = request_stamp if request_stamp is not None else (state[2] if state else 0.0)
+        if state is None or mass is None:
+            self._finish(request_id, None, "ERROR", "no state_estimate and mass_estimate yet", now)
+            return
+        pos, vel, stamp = state
+        try:
+            out = self.planner.replan(pos, vel, mass, stamp, request_id,
+                                      now_s=request_stamp if request_stamp is not None else None)
+        except InputRejected as exc:
+            self._finish(request_id, None, "ERROR", f"input rejected: {exc}", now)
+            return
+        self.replans += 1
+        self._finish(request_id, out, out.level, out.reason, stamp)
+
+    def _finish(self, request_id, out, level, reason, stamp):
+        plan = self.planner.plan
+        if plan is not None:
+            self._publish_plan(plan, stamp if out is not None and out.ok else None)
+        values = {"request_id": request_id, "method": self.planner.method,
+                  "warm_start": "yes" if out is not None and out.warm_start else "no"}
+        if out is not None:
+            values.update({"solve_time_s": f"{out.solve_time_s:.4f}",
+                           "iterations": str(out.iterations),
+                           "plan_kept": "no" if out.ok else "yes"})
+        if plan is not None:
+            values.update({"max_violation": f"{plan.max_violation:.3e}",
+                           "final_mass_kg": f"{plan.states_si[-1, 6]:.4f}"})
+        self._diag(level, reason, values, stamp)
+        with self._lock:
+            self._last = (level, reason, bool(out is not None and out.ok))
+
+    # ------------------------------------------------------------------ outputs
+    def _publish_plan(self, plan, stamp):
+        self.pub_schedule.publish(cv.plan_to_joint_trajectory(plan, self.frame_id, stamp))
+        self.pub_path.publish(cv.plan_to_path(plan, self.frame_id))
+
+    def _diag(self, level, message, values, stamp):
+        self.pub_diag.publish(cv.diagnostics(level, message, values, stamp or 0.0))
+        if level != "OK":
+            self.get_logger().warning(f"{level}: {message}")
+
+    def stop(self):
+        with self._lock:
+            self._stop = True
+            self._wake.notify_all()
+        self._worker.join(timeout=5.0)
+
+
+def run(node_factory, args=None) -> int:
+    """Spin a node with our own SIGINT/SIGTERM handling and a clean shutdown sequence."""
+    os.environ.setdefault("ROS_AUTOMATIC_DISCOVERY_RANGE", "LOCALHOST")
+    rclpy.init(args=args, signal_handler_options=SignalHandlerOptions.NO)
+    stop = threading.Event()
+    for sig in (signal.SIGINT, signal.SIGTERM):
+        signal.signal(sig, lambda *_: stop.set())
+    node = node_factory()
+    executor = MultiThreadedExecutor(num_threads=3)
+    executor.add_node(node)
+    try:
+        while not stop.is_set() and rclpy.ok():
+            executor.spin_once(timeout_sec=0.1)
+    finally:
+        if hasattr(node, "stop"):
+            node.stop()
+        executor.shutdown(timeout_sec=2.0)
+        node.destroy_node()
+        rclpy.try_shutdown()
+    return 0
+
+
+def main(args=None) -> int:
+    return run(GuidanceNode, args)
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())

@@ -1,0 +1,278 @@
+"""ROS-free guidance logic: input checks, the warm-start shift, re-optimisation, and keeping the
+last valid plan. The rclpy node (guidance_node.py) and the Monte Carlo demo both drive this class.
+
+Times are seconds on the caller's clock (message stamps); states are SI in the problem's frame
+(position m, velocity m/s), masses kg, thrust N.
+"""
+from __future__ import annotations
+
+import math
+import threading
+import time
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+
+from daddy_core.errors import DaddyError
+from daddy_core.problem import problem_from_case
+from daddy_core.problems import load_case
+from daddy_core.solver import Solution, case_options, solve
+
+# a first remaining stage shorter than this fraction of a nominal stage is merged into the next
+MIN_STAGE_FRACTION = 0.25
+# clock comparisons: times closer than this to a stage boundary count as on it [s]
+TIME_TOLERANCE_S = 1e-6
+
+
+class InputRejected(DaddyError):
+    """A state estimate, mass or request that is not used; the message names the field."""
+
+
+@dataclass
+class Plan:
+    """A valid control schedule anchored at ``epoch_s``.
+
+    Attributes:
+        epoch_s: time of the first stage start [s].
+        stage_dt_s: (K,) stage durations [s].
+        thrust_n: (K, 3) thrust per stage [N].
+        states_si: (K+1, 7) predicted states (m, m/s, kg).
+        solution: the Solution (normalised), for warm starts.
+        request_id, solve_time_s, warm_start, max_violation: provenance for diagnostics.
+    """
+
+    epoch_s: float
+    stage_dt_s: np.ndarray
+    thrust_n: np.ndarray
+    states_si: np.ndarray
+    solution: Solution
+    request_id: str = ""
+    solve_time_s: float = 0.0
+    warm_start: bool = False
+    max_violation: float = 0.0
+
+    @property
+    def stage_start_s(self) -> np.ndarray:
+        """(K,) stage start times relative to ``epoch_s``."""
+        return np.concatenate([[0.0], np.cumsum(self.stage_dt_s)[:-1]])
+
+    @property
+    def end_s(self) -> float:
+        return self.epoch_s + float(np.sum(self.stage_dt_s))
+
+    def thrust_at(self, t_s: float) -> np.ndarray:
+        """Thrust [N] of the stage containing time t (zero before the epoch or after the end)."""
+        rel = t_s - self.epoch_s + TIME_TOLERANCE_S  # a time on a stage boundary opens the stage
+        if rel < 0 or t_s + TIME_TOLERANCE_S >= self.end_s:
+            return np.zeros(3)
+        k = int(np.searchsorted(np.cumsum(self.stage_dt_s), rel, side="right"))
+        return self.thrust_n[min(k, len(self.thrust_n) - 1)].copy()
+
+
+@dataclass
+class ReplanOutcome:
+    """What one re-optimisation produced (ok: a new valid plan was stored)."""
+
+    ok: bool
+    level: str          # "OK", "WARN" or "ERROR"
+    reason: str
+    request_id: str
+    solve_time_s: float
+    plan: Plan | None
+    iterations: dict = field(default_factory=dict)
+    warm_start: bool = False
+
+
+class GuidancePlanner:
+    """Holds the scenario, the latest valid plan, and re-optimises on request (thread-safe)."""
+
+    def __init__(self, scenario: str = "halo_l2_l1", method: str = "dyn", polish: bool = True,
+                 fuel_optimal: bool = True, stages: int = 0, time_budget_s: float = 60.0,
+                 staleness_s: float = 600.0, tol_aul: float | None = None,
+                 tol_newton: float | None = None, mass_tolerance_kg: float = 1e-6):
+        self.case = load_case(scenario)
+        if self.case.spacecraft is None:
+            raise DaddyError(f"scenario {scenario!r} has no spacecraft (mass) model for guidance")
+        self.method = method
+        self.polish = bool(polish)
+        self.fuel_optimal = bool(fuel_optimal)
+        self.units = self.case.units
+        self.base_problem = problem_from_case(self.case, stages=stages or None)
+        overrides = {}
+        if tol_aul:
+            overrides["tol_aul"] = tol_aul
+        if tol_newton:
+            overrides["tol_newton"] = tol_newton
+        self.options = case_options(self.case, self.fuel_optimal, time_budget_s=time_budget_s,
+                                    **overrides)
+        # re-optimisations run the last homotopy step only (the plan is already fuel-optimal)
+        self.replan_options = self.options.with_(homotopy=self.options.homotopy[-1:])
+        self.time_budget_s = time_budget_s
+        self.staleness_s = staleness_s
+        self.mass_tolerance_kg = mass_tolerance_kg
+        self._lock = threading.Lock()
+        self._plan: Plan | None = None
+
+    # ------------------------------------------------------------------ plan access
+    @property
+    def plan(self) -> Plan | None:
+        with self._lock:
+            return self._plan
+
+    def set_plan(self, plan: Plan) -> None:
+        with self._lock:
+            self._plan = plan
+
+    # ------------------------------------------------------------------ conversions
+    def state_to_normalised(self, pos_m, vel_m_s, mass_kg) -> np.ndarray:
+        u = self.units
+        return np.concatenate([u.length(pos_m), u.speed(vel_m_s), [u.mass(mass_kg)]])
+
+    def states_to_si(self, X: np.ndarray) -> np.ndarray:
+        u = self.units
+        out = np.empty_like(X)
+        out[:, :3] = u.length_m(X[:, :3])
+        out[:, 3:6] = u.speed_m_s(X[:, 3:6])
+        out[:, 6] = u.mass_kg(X[:, 6])
+        return out
+
+    # ------------------------------------------------------------------ input checks
+    def check_state(self, pos_m, vel_m_s, mass_kg, stamp_s: float, now_s: float | None = None):
+        """Raise InputRejected (naming the field) for an estimate the planner must not use."""
+        pos = np.asarray(pos_m, dtype=float)
+        vel = np.asarray(vel_m_s, dtype=float)
+        if pos.shape != (3,) or not np.all(np.isfinite(pos)):
+            raise InputRejected("state_estimate.pose.pose.position is not 3 finite numbers")
+        if vel.shape != (3,) or not np.all(np.isfinite(vel)):
+            raise InputRejected("state_estimate.twist.twist.linear is not 3 finite numbers")
+        if mass_kg is None or not math.isfinite(mass_kg):
+            raise InputRejected("mass_estimate.inertia.m is missing or not finite")
+        sc = self.case.spacecraft
+        if mass_kg <= sc.dry_mass_kg:
+            raise InputRejected(f"mass_estimate.inertia.m = {mass_kg:.6g} kg is not above the dry "
+                                f"mass {sc.dry_mass_kg:.6g} kg")
+        if mass_kg > sc.wet_mass_kg + self.mass_tolerance_kg:
+            raise InputRejected(f"mass_estimate.inertia.m = {mass_kg:.6g} kg exceeds the wet mass "
+                                f"{sc.wet_mass_kg:.6g} kg")
+        if not math.isfinite(stamp_s):
+            raise InputRejected("header.stamp is not finite")
+        if now_s is not None:
+            if stamp_s > now_s + 1.0:
+                raise InputRejected(f"header.stamp is {stamp_s - now_s:.3g} s in the future")
+            if now_s - stamp_s > self.staleness_s:
+                raise InputRejected(f"header.stamp is stale ({now_s - stamp_s:.3g} s old, bound "
+                                    f"{self.staleness_s:.3g} s)")
+        x = self.state_to_normalised(pos, vel, mass_kg)
+        self._check_domain(x)
+        return x
+
+    def _check_domain(self, x: np.ndarray) -> None:
+        sys = self.case.system
+        r = x[:3]
+        if sys == "earth_moon_cr3bp":
+            mu = self.units.gm
+            moon_radius = 1737.4 / self.units.lu_km
+            earth_radius = 6378.1 / self.units.lu_km
+            if np.linalg.norm(r - [1 - mu, 0, 0]) < moon_radius:
+                raise InputRejected("state_estimate position is inside the Moon")
+            if np.linalg.norm(r + [mu, 0, 0]) < earth_radius:
+                raise InputRejected("state_estimate position is inside the Earth")
+            if np.linalg.norm(r) > 5.0 or np.linalg.norm(x[3:6]) > 10.0:
+                raise InputRejected("state_estimate is far outside the Earth-Moon domain")
+        elif sys == "sun_two_body":
+            if not 0.05 < np.linalg.norm(r) < 50.0 or np.linalg.norm(x[3:6]) > 10.0:
+                raise InputRejected("state_estimate is outside the heliocentric domain")
+
+    # ------------------------------------------------------------------ shift (warm start)
+    def shifted_problem(self, plan: Plan | None, t_s: float, x0: np.ndarray):
+        """The remaining problem from state x0 at time t, and the warm-start controls.
+
+        Drops the stages already executed, keeps the remaining time to go (the first remaining
+        stage is shortened to end on the plan's stage boundary, or merged into the next when
+        shorter than MIN_STAGE_FRACTION of a stage). Without a plan, the full scenario from x0.
+        Returns (problem, U_guess (K, 3) normalised or None, stage offset k0).
+        """
+        base = self.base_problem
+        if plan is None:
+            return base.with_x0(x0), None, 0
+        tu = self.units.tu_s
+        bounds = plan.epoch_s + np.cumsum(plan.stage_dt_s)          # stage end times
+        k0 = int(np.searchsorted(bounds, t_s + TIME_TOLERANCE_S, side="right"))
+        if k0 >= len(plan.stage_dt_s):
+            raise InputRejected("the plan has ended: no stage remains after header.stamp")
+        first = bounds[k0] - t_s
+        dts = plan.stage_dt_s[k0:].astype(float).copy()
+        U = plan.solution.U[k0:].copy()
+        nominal = float(np.median(plan.stage_dt_s))
+        if first < MIN_STAGE_FRACTION * nominal and len(dts) > 1:
+            dts = dts[1:]
+            dts[0] += first
+            U = U[1:]
+        else:
+            dts[0] = first
+        return base.with_x0(x0, dts / tu), U, k0
+
+    # ------------------------------------------------------------------ re-optimisation
+    def replan(self, pos_m, vel_m_s, mass_kg, stamp_s: float, request_id: str = "",
+               now_s: float | None = None, cold: bool = False) -> ReplanOutcome:
+        """Re-optimise from an estimate; store and return the new plan if it is valid.
+
+        Never raises for solver trouble: a failed, non-finite or bound-violating result leaves
+        the last valid plan in place and is reported as ERROR/WARN. Bad inputs raise
+        InputRejected before anything is touched.
+        """
+        x0 = self.check_state(pos_m, vel_m_s, mass_kg, stamp_s, now_s)
+        current = self.plan
+        problem, U_guess, _ = self.shifted_problem(None if cold else current, stamp_s, x0)
+        warm = U_guess is not None
+        if U_guess is None:
+            U_guess = np.full((problem.N, 3), float(self.units.thrust(1e-6)))
+            opts = self.options
+        else:
+            opts = self.replan_options
+        t0 = time.perf_counter()
+        try:
+            sol = solve(problem, U_guess, method=self.method, fuel_optimal=None, polish=self.polish,
+                        options=opts, case_name=self.case.name)
+        except Exception as exc:  # a solver fault must never take the plan down
+            return ReplanOutcome(False, "ERROR", f"solver raised {type(exc).__name__}: {exc}",
+                                 request_id, time.perf_counter() - t0, None, warm_start=warm)
+        dt = time.perf_counter() - t0
+        problem_ok, why = self._acceptable(sol, problem)
+        if not problem_ok:
+            return ReplanOutcome(False, "ERROR", why, request_id, dt, None, sol.iterations, warm)
+        plan = Plan(epoch_s=stamp_s, stage_dt_s=problem.stage_dt * self.units.tu_s,
+                    thrust_n=sol.U_newton.copy(), states_si=self.states_to_si(sol.X),
+                    solution=sol, request_id=request_id, solve_time_s=dt, warm_start=warm,
+                    max_violation=sol.max_violation)
+        self.set_plan(plan)
+        level, reason = "OK", "re-optimised"
+        if not sol.converged:
+            level, reason = "WARN", f"stored best feasible iterate: {sol.reason}"
+        if dt > self.time_budget_s:
+            level, reason = "WARN", f"solve took {dt:.3g} s, over the {self.time_budget_s:.3g} s budget"
+        return ReplanOutcome(True, level, reason, request_id, dt, plan, sol.iterations, warm)
+
+    def _acceptable(self, sol: Solution, problem) -> tuple[bool, str]:
+        U = sol.U
+        if not (np.all(np.isfinite(U)) and np.all(np.isfinite(sol.X))):
+            return False, "solution contains NaN or inf"
+        umax = problem.u_max
+        if umax is not None and np.max(np.linalg.norm(U, axis=1)) > umax * (1 + 1e-6):
+            return False, "solution violates the thrust bound"
+        if sol.max_violation > max(1e-6, 10 * self.options.tol_aul):
+            return False, f"solution infeasible (max violation {sol.max_violation:.2e})"
+        return True, ""
+
+    # ------------------------------------------------------------------ nominal plans
+    def load_plan(self, path: str | Path, epoch_s: float) -> Plan:
+        """Adopt a stored solution (JSON) as the plan starting at epoch_s."""
+        sol = Solution.from_json(path)
+        if sol.U.shape[0] != self.base_problem.N:
+            raise DaddyError(f"plan file {path} has {sol.U.shape[0]} stages, scenario has "
+                             f"{self.base_problem.N}")
+        plan = Plan(epoch_s, sol.stage_dt * self.units.tu_s, sol.U_newton.copy(),
+                    self.states_to_si(sol.X), sol, "nominal", 0.0, False, sol.max_violation)
+        self.set_plan(plan)
+        return plan

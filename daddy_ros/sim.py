@@ -1,0 +1,80 @@
+"""Truth simulation for the closed GNC loop (ROS-free): propagates the real dynamics with the
+applied thrust, and models navigation errors (on the published estimate) and execution errors
+(thrust magnitude and pointing). SI at the interface, normalised inside."""
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from daddy_core.integrators import rk78
+from daddy_core.problems import load_case
+
+
+@dataclass(frozen=True)
+class Errors:
+    """1-sigma error levels."""
+
+    nav_pos_m: float = 100.0
+    nav_vel_m_s: float = 1e-3
+    exec_mag: float = 0.01            # relative thrust magnitude
+    exec_point_deg: float = 1.0       # pointing
+
+
+class TruthSim:
+    """The real spacecraft: state in SI, advanced with piecewise-constant applied thrust."""
+
+    def __init__(self, case_name: str, errors: Errors = Errors(), seed: int = 0, t0_s: float = 0.0):
+        self.case = load_case(case_name)
+        self.units = self.case.units
+        self.rhs = self.case.rhs()
+        self.errors = errors
+        self.rng = np.random.default_rng(seed)
+        self.x = self.case.x0.copy()        # normalised truth
+        self.t_s = t0_s
+        self.t0_s = t0_s
+        self.steps = 0
+
+    @property
+    def tof_s(self) -> float:
+        return self.case.tof * self.units.tu_s
+
+    def truth_si(self):
+        u = self.units
+        return u.length_m(self.x[:3]), u.speed_m_s(self.x[3:6]), float(u.mass_kg(self.x[6]))
+
+    def estimate_si(self):
+        """A navigation estimate: truth + Gaussian errors (position m, velocity m/s, mass kg)."""
+        p, v, m = self.truth_si()
+        e = self.errors
+        return (p + self.rng.normal(scale=e.nav_pos_m, size=3),
+                v + self.rng.normal(scale=e.nav_vel_m_s, size=3), m)
+
+    def apply(self, thrust_n: np.ndarray, dt_s: float) -> np.ndarray:
+        """Fly ``dt_s`` with the commanded thrust perturbed by execution errors; returns the
+        thrust actually applied [N]."""
+        u = np.asarray(thrust_n, dtype=float)
+        mag = np.linalg.norm(u)
+        if mag > 0:
+            e = self.errors
+            axis = np.cross(u, self.rng.normal(size=3))
+            axis /= np.linalg.norm(axis)
+            ang = np.radians(self.rng.normal(scale=e.exec_point_deg))
+            # Rodrigues rotation of u about an axis normal to it
+            u = u * np.cos(ang) + np.cross(axis, u) * np.sin(ang)
+            u = u * (1.0 + self.rng.normal(scale=e.exec_mag))
+            umax = self.case.spacecraft.max_thrust_n
+            if np.linalg.norm(u) > umax * 1.05:  # the engine cannot exceed its rating by much
+                u *= umax * 1.05 / np.linalg.norm(u)
+        un = self.units.thrust(u)
+        self.x = rk78(self.rhs, self.x, un, 0.0, float(self.units.time(dt_s)), tol=1e-12)
+        self.t_s += dt_s
+        self.steps += 1
+        return u
+
+    def miss(self):
+        """(position miss m, velocity miss m/s) with respect to the case target."""
+        u = self.units
+        xt = self.case.x_target
+        return (float(np.linalg.norm(u.length_m(self.x[:3] - xt[:3]))),
+                float(np.linalg.norm(u.speed_m_s(self.x[3:6] - xt[3:6]))))
