@@ -169,8 +169,12 @@ def low_thrust_costs(n_pos: int, u_max: float, dt_avg: float, stage_gain: float,
 
 
 def problem_from_case(case, integrator: str = "rk78", integrator_tol: float | None = None,
-                      stages: int | None = None) -> Problem:
-    """Build the paper's problem for a catalogue ``Case`` (costs, constraints, units)."""
+                      stages: int | None = None, max_thrust_n: float | None = None) -> Problem:
+    """Build the paper's problem for a catalogue ``Case`` (costs, constraints, units).
+
+    ``max_thrust_n`` overrides the spacecraft's thrust bound (e.g. a derated bound that leaves
+    guidance a control margin); the cost scaling keeps the spacecraft's rating.
+    """
     s = case.solver
     N = case.stages if stages is None else int(stages)
     if N < 1:
@@ -193,6 +197,9 @@ def problem_from_case(case, integrator: str = "rk78", integrator_tol: float | No
     sc = case.spacecraft
     units = case.units
     u_max = float(units.thrust(sc.max_thrust_n))
+    u_bound = u_max if max_thrust_n is None else float(units.thrust(max_thrust_n))
+    if not u_bound > 0:
+        raise DaddyError(f"max_thrust_n must be positive, got {max_thrust_n!r}")
     m_dry = sc.dry_mass_kg / units.mu_kg
     n_pos = 5 if case.system == "earth_equinoctial" else 6
     stage_cost, terminal_cost = low_thrust_costs(
@@ -202,11 +209,11 @@ def problem_from_case(case, integrator: str = "rk78", integrator_tol: float | No
 
     def g_ineq(x, u, d):
         # thrust bound |u|^2 / u_max^2 - 1 <= 0 and dry mass m_dry - m <= 0 (paper eq. 18)
-        return dm.stack([(u[0] * u[0] + u[1] * u[1] + u[2] * u[2]) * (1.0 / u_max ** 2) - 1.0,
+        return dm.stack([(u[0] * u[0] + u[1] * u[1] + u[2] * u[2]) * (1.0 / u_bound ** 2) - 1.0,
                          m_dry - x[6]])
 
     return Problem(name=case.name, x0=case.x0, x_target=case.x_target, stage_dt=dt,
                    step=flow_step(rhs, integrator, tol), stage_cost=stage_cost,
                    terminal_cost=terminal_cost, g_ineq=g_ineq,
                    g_teq=lambda x, xt: x[:n_pos] - xt[:n_pos], units=units, spacecraft=sc,
-                   u_max=u_max, mass_index=6, rhs=rhs)
+                   u_max=u_bound, mass_index=6, rhs=rhs)

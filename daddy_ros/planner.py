@@ -9,7 +9,7 @@ from __future__ import annotations
 import math
 import threading
 import time
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 
 import numpy as np
@@ -23,6 +23,8 @@ from daddy_core.solver import Solution, case_options, solve
 MIN_STAGE_FRACTION = 0.25
 # clock comparisons: times closer than this to a stage boundary count as on it [s]
 TIME_TOLERANCE_S = 1e-6
+# relative thrust-bound excess (solver tolerance) saturated onto the bound rather than rejected
+SATURATION_SLACK = 1e-3
 
 
 class InputRejected(DaddyError):
@@ -90,7 +92,8 @@ class GuidancePlanner:
     def __init__(self, scenario: str = "halo_l2_l1", method: str = "dyn", polish: bool = True,
                  fuel_optimal: bool = True, stages: int = 0, time_budget_s: float = 60.0,
                  staleness_s: float = 600.0, tol_aul: float | None = None,
-                 tol_newton: float | None = None, mass_tolerance_kg: float = 1e-6):
+                 tol_newton: float | None = None, mass_tolerance_kg: float = 1e-6,
+                 thrust_margin: float = 0.05):
         self.case = load_case(scenario)
         if self.case.spacecraft is None:
             raise DaddyError(f"scenario {scenario!r} has no spacecraft (mass) model for guidance")
@@ -98,7 +101,14 @@ class GuidancePlanner:
         self.polish = bool(polish)
         self.fuel_optimal = bool(fuel_optimal)
         self.units = self.case.units
-        self.base_problem = problem_from_case(self.case, stages=stages or None)
+        if not 0.0 <= thrust_margin < 1.0:
+            raise DaddyError(f"thrust_margin must be in [0, 1), got {thrust_margin!r}")
+        # plans keep a thrust margin for closed-loop corrections; the full rating is used only
+        # when the derated problem cannot meet the target any more
+        self.full_problem = problem_from_case(self.case, stages=stages or None)
+        self.base_problem = problem_from_case(
+            self.case, stages=stages or None,
+            max_thrust_n=self.case.spacecraft.max_thrust_n * (1.0 - thrust_margin))
         overrides = {}
         if tol_aul:
             overrides["tol_aul"] = tol_aul
@@ -235,35 +245,88 @@ class GuidancePlanner:
         try:
             sol = solve(problem, U_guess, method=self.method, fuel_optimal=None, polish=self.polish,
                         options=opts, case_name=self.case.name)
+            safe, feasible, why = self._assess(sol, problem)
+            if not safe and self.polish:
+                # polishing an infeasible problem can push the thrust past its bound: fall back
+                # to the DDP result, which keeps the bound and minimises the terminal miss
+                sol = solve(problem, sol.U if np.all(np.isfinite(sol.U)) else U_guess,
+                            method=self.method, fuel_optimal=None, polish=False, options=opts,
+                            case_name=self.case.name)
+                safe, feasible, why = self._assess(sol, problem)
         except Exception as exc:  # a solver fault must never take the plan down
             return ReplanOutcome(False, "ERROR", f"solver raised {type(exc).__name__}: {exc}",
                                  request_id, time.perf_counter() - t0, None, warm_start=warm)
         dt = time.perf_counter() - t0
-        problem_ok, why = self._acceptable(sol, problem)
-        if not problem_ok:
+        if not (safe and feasible) and self.full_problem.u_max > problem.u_max:
+            # the margin is spent: allow the full thrust rating
+            full = replace(problem, u_max=self.full_problem.u_max, g_ineq=self.full_problem.g_ineq)
+            try:
+                sol2 = solve(full, sol.U if safe else U_guess, method=self.method,
+                             fuel_optimal=None, polish=self.polish, options=opts,
+                             case_name=self.case.name)
+                safe2, feasible2, why2 = self._assess(sol2, full)
+                if safe2 and (feasible2 or not safe):
+                    sol, problem, safe, feasible, why = sol2, full, safe2, feasible2, why2
+            except Exception:  # keep the derated result
+                pass
+            dt = time.perf_counter() - t0
+        if not safe:
             return ReplanOutcome(False, "ERROR", why, request_id, dt, None, sol.iterations, warm)
+        if not feasible and warm:
+            # a best-effort plan replaces the current one only if it is predicted to miss less
+            old_miss = self.terminal_miss(problem, U_guess)
+            if self.terminal_miss(problem, sol.U) >= old_miss:
+                return ReplanOutcome(False, "WARN", f"kept the current plan: {why}, and no better "
+                                     f"than flying it (miss {old_miss:.2e})", request_id, dt, None,
+                                     sol.iterations, warm)
         plan = Plan(epoch_s=stamp_s, stage_dt_s=problem.stage_dt * self.units.tu_s,
-                    thrust_n=sol.U_newton.copy(), states_si=self.states_to_si(sol.X),
+                    thrust_n=sol.U_newton.copy(), states_si=self.states_to_si(problem.rollout(sol.U)),
                     solution=sol, request_id=request_id, solve_time_s=dt, warm_start=warm,
                     max_violation=sol.max_violation)
         self.set_plan(plan)
         level, reason = "OK", "re-optimised"
-        if not sol.converged:
+        if not feasible:
+            level, reason = "WARN", f"best effort within the thrust bound: {why}"
+        elif not sol.converged:
             level, reason = "WARN", f"stored best feasible iterate: {sol.reason}"
         if dt > self.time_budget_s:
             level, reason = "WARN", f"solve took {dt:.3g} s, over the {self.time_budget_s:.3g} s budget"
         return ReplanOutcome(True, level, reason, request_id, dt, plan, sol.iterations, warm)
 
-    def _acceptable(self, sol: Solution, problem) -> tuple[bool, str]:
+    def _assess(self, sol: Solution, problem) -> tuple[bool, bool, str]:
+        """(safe to fly, meets every constraint, reason). Safe: finite and within the thrust
+        and mass bounds; feasible: also meets the terminal constraints.
+
+        Thrust magnitudes over the bound by at most SATURATION_SLACK (relative; solver
+        tolerance) are saturated onto it in place -- the engine cannot do more anyway.
+        """
         U = sol.U
         if not (np.all(np.isfinite(U)) and np.all(np.isfinite(sol.X))):
-            return False, "solution contains NaN or inf"
+            return False, False, "solution contains NaN or inf"
         umax = problem.u_max
-        if umax is not None and np.max(np.linalg.norm(U, axis=1)) > umax * (1 + 1e-6):
-            return False, "solution violates the thrust bound"
-        if sol.max_violation > max(1e-6, 10 * self.options.tol_aul):
-            return False, f"solution infeasible (max violation {sol.max_violation:.2e})"
-        return True, ""
+        if umax is not None:
+            mags = np.linalg.norm(U, axis=1)
+            if np.max(mags) > umax * (1 + SATURATION_SLACK):
+                return False, False, "solution violates the thrust bound"
+            over = mags > umax
+            U[over] *= (umax / mags[over])[:, None]
+        X = problem.rollout(U)
+        if not np.all(np.isfinite(X)):
+            return False, False, "solution propagates to a non-finite state"
+        g, ni = problem.path_constraints(X[:-1].T, U.T, problem.stage_dt)
+        if g is not None and ni and np.max(g[:ni]) > 1e-6:
+            return False, False, f"solution violates a path constraint by {np.max(g[:ni]):.2e}"
+        gt, _ = problem.terminal_constraints(X[-1])
+        miss = float(np.max(np.abs(gt))) if gt is not None else 0.0
+        if miss > max(1e-6, 10 * self.options.tol_aul):
+            return True, False, f"terminal constraint missed by {miss:.2e} (normalised)"
+        return True, True, ""
+
+    @staticmethod
+    def terminal_miss(problem, U) -> float:
+        """Predicted max |terminal constraint| when flying U from the problem's x0."""
+        gt, _ = problem.terminal_constraints(problem.rollout(U)[-1])
+        return float(np.max(np.abs(gt))) if gt is not None else 0.0
 
     # ------------------------------------------------------------------ nominal plans
     def load_plan(self, path: str | Path, epoch_s: float) -> Plan:
