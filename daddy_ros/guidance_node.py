@@ -141,24 +141,33 @@ class GuidanceNode(Node):
             return
         with self._lock:
             self._state = (pos, vel, stamp)
-            mass = self._mass
-        plan = self.planner.plan
-        if plan is None and self.plan_file and mass is not None:
-            try:
-                plan = self.planner.load_plan(self.plan_file, stamp)
-                self._publish_plan(plan, stamp)
-                self._diag("OK", f"adopted nominal plan {Path(self.plan_file).name}",
-                           {"request_id": "nominal"}, stamp)
-            except Exception as exc:
-                self._diag("ERROR", f"cannot load plan_file: {exc}", {}, stamp)
-                self.plan_file = ""
+        plan = self.planner.plan or self._adopt_nominal()
         if plan is not None:
             self.pub_thrust.publish(cv.thrust_command(plan.thrust_at(stamp), stamp, self.frame_id))
 
     def _on_mass(self, msg: InertiaStamped):
-        m = float(msg.inertia.m)
         with self._lock:
-            self._mass = m
+            self._mass = float(msg.inertia.m)
+        if self.planner.plan is None:
+            self._adopt_nominal()
+
+    def _adopt_nominal(self):
+        """Adopt the nominal plan at the first estimate (state and mass both received)."""
+        with self._lock:
+            state, mass, plan_file = self._state, self._mass, self.plan_file
+        if not plan_file or state is None or mass is None:
+            return None
+        stamp = state[2]
+        try:
+            plan = self.planner.load_plan(plan_file, stamp)
+        except Exception as exc:
+            self._diag("ERROR", f"cannot load plan_file: {exc}", {}, stamp)
+            self.plan_file = ""
+            return None
+        self._publish_plan(plan, stamp)
+        self._diag("OK", f"adopted nominal plan {Path(plan_file).name}", {"request_id": "nominal"},
+                   stamp)
+        return plan
 
     def _on_request(self, msg: Header):
         self._enqueue(msg.frame_id or "topic", cv.stamp_to_s(msg.stamp))

@@ -1,0 +1,209 @@
+"""The guidance node over real rclpy / Fast DDS on loopback: requests, schedules, diagnostics,
+malformed inputs, the Trigger service."""
+import math
+import os
+import threading
+import time
+
+import numpy as np
+import pytest
+
+rclpy = pytest.importorskip("rclpy")
+
+from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus  # noqa: E402
+from geometry_msgs.msg import InertiaStamped, Vector3Stamped  # noqa: E402
+from nav_msgs.msg import Odometry  # noqa: E402
+from rclpy.executors import MultiThreadedExecutor  # noqa: E402
+from std_msgs.msg import Header  # noqa: E402
+from std_srvs.srv import Trigger  # noqa: E402
+from trajectory_msgs.msg import JointTrajectory  # noqa: E402
+
+from daddy_ros import conversions as cv  # noqa: E402
+from daddy_ros.guidance_node import LATCHED, RELIABLE, GuidanceNode  # noqa: E402
+from daddy_ros.sim import TruthSim  # noqa: E402
+
+assert os.environ["ROS_AUTOMATIC_DISCOVERY_RANGE"] == "LOCALHOST"
+FRAME = "sun_ecliptic"
+T0 = 1000.0
+
+
+class Client:
+    def __init__(self):
+        self.node = rclpy.create_node("daddy_test_client")
+        self.pub_state = self.node.create_publisher(Odometry, "state_estimate", RELIABLE)
+        self.pub_mass = self.node.create_publisher(InertiaStamped, "mass_estimate", RELIABLE)
+        self.pub_req = self.node.create_publisher(Header, "replan_request", RELIABLE)
+        self.cli = self.node.create_client(Trigger, "/daddy_guidance/replan")
+        self.lock = threading.Condition()
+        self.schedules, self.diags, self.thrust = [], [], []
+        self.node.create_subscription(JointTrajectory, "control_schedule",
+                                      lambda m: self._add(self.schedules, m), LATCHED)
+        self.node.create_subscription(DiagnosticArray, "/diagnostics",
+                                      lambda m: self._add(self.diags, m), RELIABLE)
+        self.node.create_subscription(Vector3Stamped, "thrust_command",
+                                      lambda m: self._add(self.thrust, m), RELIABLE)
+
+    def _add(self, bucket, msg):
+        with self.lock:
+            bucket.append(msg)
+            self.lock.notify_all()
+
+    def wait_for(self, pred, timeout):
+        end = time.monotonic() + timeout
+        with self.lock:
+            while time.monotonic() < end:
+                r = pred()
+                if r:
+                    return r
+                self.lock.wait(0.05)
+        return None
+
+    def diag_for(self, request_id):
+        for m in self.diags:
+            for st in m.status:
+                vals = {kv.key: kv.value for kv in st.values}
+                if vals.get("request_id") == request_id:
+                    return st, vals
+        return None
+
+    def send_state(self, pos, vel, mass, stamp, frame=FRAME):
+        m = InertiaStamped()
+        m.header = Header(stamp=cv.s_to_stamp(stamp), frame_id=frame)
+        m.inertia.m = float(mass)
+        self.pub_mass.publish(m)
+        self.pub_state.publish(cv.state_to_odometry(pos, vel, stamp, frame))
+
+    def request(self, rid, stamp):
+        self.pub_req.publish(Header(stamp=cv.s_to_stamp(stamp), frame_id=rid))
+
+
+@pytest.fixture(scope="module")
+def graph():
+    rclpy.init()
+    node = GuidanceNode(scenario="earth_mars", frame_id=FRAME, time_budget_s=60.0)
+    client = Client()
+    ex = MultiThreadedExecutor(num_threads=4)
+    ex.add_node(node)
+    ex.add_node(client.node)
+    th = threading.Thread(target=ex.spin, daemon=True)
+    th.start()
+    # discovery of a late joiner can take a while: poll, never sleep a fixed time
+    end = time.monotonic() + 15
+    while time.monotonic() < end and not (client.pub_state.get_subscription_count()
+                                          and client.pub_req.get_subscription_count()):
+        time.sleep(0.05)
+    assert client.pub_state.get_subscription_count(), "no discovery on loopback"
+    yield node, client
+    node.stop()
+    ex.shutdown(timeout_sec=2.0)
+    node.destroy_node()
+    client.node.destroy_node()
+    rclpy.try_shutdown()
+
+
+def truth_at_start():
+    sim = TruthSim("earth_mars", t0_s=T0)
+    return sim.truth_si()
+
+
+def test_nominal_then_replan_publishes_valid_schedule(graph):
+    node, c = graph
+    pos, vel, mass = truth_at_start()
+    c.send_state(pos, vel, mass, T0)
+    assert c.wait_for(lambda: c.schedules, 15), "no schedule after the first estimate"
+    # a perturbed state 5 % into the flight (1000 km, 1 m/s), a warm-started re-optimisation
+    sim = TruthSim("earth_mars", t0_s=T0)
+    plan = node.planner.plan
+    k = 2
+    for j in range(k):
+        sim.apply(plan.thrust_n[j], plan.stage_dt_s[j])
+    p, v, m = sim.truth_si()
+    t = sim.t_s
+    c.send_state(p + [1e6, 0, 0], v + [1.0, 0, 0], m, t)
+    c.wait_for(lambda: c.thrust, 10)
+    c.request("req-1", t)
+    got = c.wait_for(lambda: c.diag_for("req-1"), 120)
+    assert got, "no diagnostics for req-1"
+    st, vals = got
+    assert st.level == DiagnosticStatus.OK, st.message
+    assert st.name.startswith("daddy_guidance")
+    for key in ("request_id", "solve_time_s", "max_violation", "final_mass_kg", "method", "warm_start"):
+        assert key in vals
+    assert vals["warm_start"] == "yes"
+    sched = c.wait_for(lambda: [s for s in c.schedules if cv.stamp_to_s(s.header.stamp) >= t - 1e-3], 10)
+    assert sched
+    starts, u = cv.joint_trajectory_to_schedule(sched[-1])
+    assert sched[-1].joint_names == ["thrust_x", "thrust_y", "thrust_z"]
+    assert sched[-1].header.frame_id == FRAME
+    assert len(u) == 40 - k and np.all(np.isfinite(u))
+    assert np.all(np.linalg.norm(u, axis=1) <= 0.5 * (1 + 1e-6))
+    assert np.all(np.diff(starts) > 0) and starts[0] == pytest.approx(0.0)
+
+
+@pytest.mark.parametrize("case", ["nan", "frame", "negative_mass", "future", "inside_sun"])
+def test_malformed_inputs_get_diagnostics_and_keep_plan(graph, case):
+    node, c = graph
+    plan_before = node.planner.plan
+    assert plan_before is not None
+    pos, vel, mass = truth_at_start()
+    t = plan_before.epoch_s + 10.0
+    rid = f"bad-{case}"
+    if case == "nan":
+        c.send_state(pos * math.nan, vel, mass, t)
+    elif case == "frame":
+        n0 = len(c.diags)
+        c.send_state(pos, vel, mass, t, frame="map")
+        got = c.wait_for(lambda: [d for d in c.diags[n0:] if "frame_id" in d.status[0].message], 10)
+        assert got and got[0].status[0].level == DiagnosticStatus.ERROR
+        assert node.planner.plan is plan_before
+        return
+    elif case == "negative_mass":
+        c.send_state(pos, vel, -5.0, t)
+    elif case == "future":
+        c.send_state(pos, vel, mass, t + 1e5)
+    elif case == "inside_sun":
+        c.send_state(pos * 1e-3, vel, mass, t)
+    time.sleep(0.1)
+    c.request(rid, t)
+    got = c.wait_for(lambda: c.diag_for(rid), 30)
+    assert got, f"no diagnostics for {rid}"
+    st, _ = got
+    assert st.level == DiagnosticStatus.ERROR
+    assert "rejected" in st.message
+    assert node.planner.plan is plan_before  # the last valid plan is kept
+    last = c.schedules[-1]
+    _, u = cv.joint_trajectory_to_schedule(last)
+    assert np.all(np.isfinite(u))
+
+
+def test_trigger_service_answers(graph):
+    node, c = graph
+    plan = node.planner.plan
+    sim = TruthSim("earth_mars", t0_s=T0)
+    p, v, m = sim.truth_si()
+    # a valid estimate on the current plan's epoch
+    c.send_state(plan.states_si[0, :3], plan.states_si[0, 3:6], plan.states_si[0, 6], plan.epoch_s)
+    time.sleep(0.1)
+    assert c.cli.wait_for_service(timeout_sec=10)
+    fut = c.cli.call_async(Trigger.Request())
+    end = time.monotonic() + 120
+    while not fut.done() and time.monotonic() < end:
+        time.sleep(0.05)
+    assert fut.done()
+    assert fut.result().success, fut.result().message
+
+
+def test_triggers_during_a_solve_are_coalesced(graph):
+    node, c = graph
+    plan = node.planner.plan
+    c.send_state(plan.states_si[0, :3], plan.states_si[0, 3:6], plan.states_si[0, 6], plan.epoch_s)
+    time.sleep(0.1)
+    before_replans, before_coalesced = node.replans, node.coalesced
+    for i in range(20):
+        c.request(f"burst-{i}", plan.epoch_s)
+    last = c.wait_for(lambda: c.diag_for("burst-19"), 180)
+    assert last, "the newest request was not answered"
+    solved = node.replans - before_replans
+    merged = node.coalesced - before_coalesced
+    assert solved + merged == 20   # every request was either solved or merged into a solve
+    assert merged >= 1 and solved < 20
