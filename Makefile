@@ -17,7 +17,7 @@ export ROS_DOMAIN_ID ?= $(shell echo $$(( $$$$ % 100 + 100 )))
 export ROS_LOG_DIR ?= $(shell mktemp -d /tmp/daddy-roslog.XXXXXX)
 export ROS_PYTHON_CHECK_FIELDS := 1
 
-.PHONY: demo test test-slow bench venv clean
+.PHONY: demo test test-slow bench monte-carlo venv clean
 
 venv: $(STAMP)
 
@@ -35,8 +35,9 @@ $(STAMP): requirements/pins.txt requirements/core.txt requirements/ros.txt setup
 	$(PY) -m pip install --disable-pip-version-check -q --no-deps -e .; \
 	touch $@
 
+DEMO_CASE ?= halo_l2_l1
 demo: $(STAMP)
-	$(VENV)/bin/daddy solve double_integrator --method dyn
+	$(VENV)/bin/gnc_demo --case $(DEMO_CASE)
 
 test: $(STAMP)
 	$(PY) -m pytest -q test
@@ -44,8 +45,11 @@ test: $(STAMP)
 test-slow: $(STAMP)
 	$(PY) -m pytest -q -m slow test --run-slow
 
+monte-carlo: $(STAMP)
+	$(VENV)/bin/gnc_demo --case $(DEMO_CASE) --runs $(or $(RUNS),100)
+
 bench: $(STAMP)
-	$(PY) bench/bench_da.py
+	cd bench && ../$(PY) bench_da.py && ../$(PY) bench_solver.py && ../$(PY) bench_replan.py
 
 clean:
 	rm -rf $(VENV) build install log *.egg-info

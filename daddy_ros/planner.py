@@ -201,11 +201,11 @@ class GuidancePlanner:
         Drops the stages already executed, keeps the remaining time to go (the first remaining
         stage is shortened to end on the plan's stage boundary, or merged into the next when
         shorter than MIN_STAGE_FRACTION of a stage). Without a plan, the full scenario from x0.
-        Returns (problem, U_guess (K, 3) normalised or None, stage offset k0).
+        Returns (problem, U_guess (K, 3) normalised or None, duals for those stages or None).
         """
         base = self.base_problem
         if plan is None:
-            return base.with_x0(x0), None, 0
+            return base.with_x0(x0), None, None
         tu = self.units.tu_s
         bounds = plan.epoch_s + np.cumsum(plan.stage_dt_s)          # stage end times
         k0 = int(np.searchsorted(bounds, t_s + TIME_TOLERANCE_S, side="right"))
@@ -214,14 +214,18 @@ class GuidancePlanner:
         first = bounds[k0] - t_s
         dts = plan.stage_dt_s[k0:].astype(float).copy()
         U = plan.solution.U[k0:].copy()
+        lam = np.asarray(plan.solution.duals.get("lam", []), float)
+        lam = lam[:, k0:] if lam.ndim == 2 and lam.shape[1] == len(plan.stage_dt_s) else None
         nominal = float(np.median(plan.stage_dt_s))
         if first < MIN_STAGE_FRACTION * nominal and len(dts) > 1:
             dts = dts[1:]
             dts[0] += first
             U = U[1:]
+            lam = None if lam is None else lam[:, 1:]
         else:
             dts[0] = first
-        return base.with_x0(x0, dts / tu), U, k0
+        duals = None if lam is None else {"lam": lam, "lam_t": plan.solution.duals.get("lam_t", [])}
+        return base.with_x0(x0, dts / tu), U, duals
 
     # ------------------------------------------------------------------ re-optimisation
     def replan(self, pos_m, vel_m_s, mass_kg, stamp_s: float, request_id: str = "",
@@ -234,7 +238,7 @@ class GuidancePlanner:
         """
         x0 = self.check_state(pos_m, vel_m_s, mass_kg, stamp_s, now_s)
         current = self.plan
-        problem, U_guess, _ = self.shifted_problem(None if cold else current, stamp_s, x0)
+        problem, U_guess, duals = self.shifted_problem(None if cold else current, stamp_s, x0)
         warm = U_guess is not None
         if U_guess is None:
             U_guess = np.full((problem.N, 3), float(self.units.thrust(1e-6)))
@@ -244,7 +248,7 @@ class GuidancePlanner:
         t0 = time.perf_counter()
         try:
             sol = solve(problem, U_guess, method=self.method, fuel_optimal=None, polish=self.polish,
-                        options=opts, case_name=self.case.name)
+                        options=opts, case_name=self.case.name, duals=duals)
             safe, feasible, why = self._assess(sol, problem)
             if not safe and self.polish:
                 # polishing an infeasible problem can push the thrust past its bound: fall back

@@ -49,6 +49,7 @@ class Solution:
     history: list = field(default_factory=list)
     units: dict = field(default_factory=dict)
     polynomial_share: float = 0.0
+    duals: dict = field(default_factory=dict)  # {"lam": (n_c, N), "lam_t": (n_t,)} as lists
 
     _ARRAYS = ("X", "U", "stage_dt", "gains_a", "gains_b")
 

@@ -85,7 +85,7 @@ def objective(problem, X, U, hom) -> float:
 
 def solve(problem, u_guess=None, method: str = "dyn", fuel_optimal: bool | None = None,
           polish: bool = True, options: SolverOptions | None = None, case_name: str | None = None,
-          progress=None) -> Solution:
+          progress=None, duals: dict | None = None) -> Solution:
     """Solve ``problem`` with DADDy.
 
     Args:
@@ -97,6 +97,8 @@ def solve(problem, u_guess=None, method: str = "dyn", fuel_optimal: bool | None 
         polish: finish with the Newton polishing (Alg. 11) to ``options.tol_newton``.
         options: ``SolverOptions``.
         progress: callable receiving progress lines (or None).
+        duals: warm-start multipliers {"lam": (n_c, N), "lam_t": (n_t,)} (default: those of a
+            Solution given as ``u_guess``, when their shapes fit).
     Returns:
         a ``Solution``. A solve that fails returns ``converged=False`` with the reason and the
         best feasible-so-far iterate (never NaN).
@@ -104,6 +106,7 @@ def solve(problem, u_guess=None, method: str = "dyn", fuel_optimal: bool | None 
     opts = options or SolverOptions()
     sweep, dyn = parse_method(method)
     if isinstance(u_guess, Solution):
+        duals = duals if duals is not None else u_guess.duals
         u_guess = u_guess.U
     if u_guess is None:
         u_guess = np.full((problem.N, problem.nu), 1e-6)
@@ -127,6 +130,12 @@ def solve(problem, u_guess=None, method: str = "dyn", fuel_optimal: bool | None 
     reason = "converged"
     st = None
     mult = Multipliers.initial(problem, opts.mu_init)
+    if duals:
+        lam, lam_t = np.asarray(duals.get("lam", []), float), np.asarray(duals.get("lam_t", []), float)
+        if lam.shape == mult.lam.shape and lam_t.shape == mult.lam_t.shape and \
+                np.all(np.isfinite(lam)) and np.all(np.isfinite(lam_t)):
+            mult.lam[...] = lam
+            mult.lam_t[...] = lam_t
     for i, hom in enumerate(hom_seq):
         if progress:
             progress(f"homotopy {i + 1}/{len(hom_seq)}: h = {hom[0]}, delta = {hom[1]}")
@@ -190,5 +199,6 @@ def solve(problem, u_guess=None, method: str = "dyn", fuel_optimal: bool | None 
         units={"system": units.name, "lu_km": units.lu_km, "tu_s": units.tu_s,
                "mu_kg": units.mu_kg, "thrust_unit_n": units.thrust_unit_n},
         polynomial_share=stats.polynomial_share,
+        duals={"lam": mult.lam.tolist(), "lam_t": mult.lam_t.tolist()},
     )
     return sol

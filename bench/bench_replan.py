@@ -1,0 +1,110 @@
+"""Warm-started re-optimisation latency (Dyn + Newton polishing) from a state perturbed off the
+nominal after 5 % of the flight time (issue #4): Earth-Mars 1000 km / 1 m/s; halo 10 km / 1 cm/s
+(halo only with its nominal plan bundled). Also the cold re-solve from the same perturbed state,
+and the end-to-end latency trigger -> schedule received by another node over ROS 2.
+
+    .venv/bin/python bench/bench_replan.py [--trials 5] [--no-ros]
+"""
+from __future__ import annotations
+
+import argparse
+import os
+import statistics
+import time
+
+import numpy as np
+
+from daddy_ros.demo import PLANS_DIR, T0_S, nominal_planner
+from daddy_ros.sim import Errors, TruthSim
+
+PERTURB = {"earth_mars": (1e6, 1.0), "halo_l2_l1": (1e4, 1e-2)}
+PEER_MS = {"earth_mars": 68.0, "halo_l2_l1": 146.0}   # CasADi + IPOPT warm-started (issue #4)
+TARGET_MS = {"earth_mars": 50.0, "halo_l2_l1": 150.0}
+
+
+def perturbed_state(case, planner, rng, dr, dv):
+    sim = TruthSim(case, Errors(0, 0, 0, 0), t0_s=T0_S)
+    plan = planner.plan
+    t_stop = T0_S + 0.05 * sim.tof_s
+    while sim.t_s < t_stop - 1e-6:
+        step = min(plan.stage_dt_s[0], t_stop - sim.t_s)
+        sim.apply(plan.thrust_at(sim.t_s), step)
+    p, v, m = sim.truth_si()
+    e1, e2 = rng.normal(size=3), rng.normal(size=3)
+    return p + dr * e1 / np.linalg.norm(e1), v + dv * e2 / np.linalg.norm(e2), m, sim.t_s
+
+
+def main():
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--trials", type=int, default=5)
+    ap.add_argument("--no-ros", action="store_true")
+    args = ap.parse_args()
+    from bench_da import machine
+    print(f"machine: {machine()}")
+    rng = np.random.default_rng(0)
+    for case, (dr, dv) in PERTURB.items():
+        if not (PLANS_DIR / f"{case}_fuel.json").exists():
+            print(f"{case}: no bundled nominal plan, skipped")
+            continue
+        warm, cold_ok, cold_t = [], 0, []
+        for i in range(args.trials):
+            planner, _ = nominal_planner(case, 600.0)
+            p, v, m, t = perturbed_state(case, planner, rng, dr, dv)
+            out = planner.replan(p, v, m, t, f"w{i}", now_s=t)
+            warm.append(out.solve_time_s * 1e3)
+            if i == 0:
+                print(f"{case}: warm replan level {out.level} ({out.reason}), "
+                      f"{out.iterations}", flush=True)
+        med = statistics.median(warm)
+        print(f"{case}: warm-started replan median {med:.0f} ms (max {max(warm):.0f}) over "
+              f"{args.trials}; target {TARGET_MS[case]:.0f} ms (ratio {med / TARGET_MS[case]:.1f}); "
+              f"CasADi peer {PEER_MS[case]:.0f} ms (ratio {med / PEER_MS[case]:.1f})", flush=True)
+        planner, _ = nominal_planner(case, 600.0)
+        p, v, m, t = perturbed_state(case, planner, rng, dr, dv)
+        t0 = time.perf_counter()
+        out = planner.replan(p, v, m, t, "cold", now_s=t, cold=True)
+        cold_t.append(time.perf_counter() - t0)
+        cold_ok += out.ok and out.level == "OK"
+        print(f"{case}: cold re-solve from the perturbed state: {out.level} ({out.reason}) in "
+              f"{cold_t[0]:.1f} s", flush=True)
+    if not args.no_ros:
+        end_to_end()
+
+
+def end_to_end(trials: int = 5):
+    """Trigger -> schedule received by another node, over ROS 2 on loopback (Earth-Mars)."""
+    os.environ.setdefault("ROS_AUTOMATIC_DISCOVERY_RANGE", "LOCALHOST")
+    import threading
+
+    import rclpy
+    from rclpy.executors import MultiThreadedExecutor
+
+    from daddy_ros.demo import RosLink
+    from daddy_ros.guidance_node import GuidanceNode
+    rclpy.init()
+    g = GuidanceNode(scenario="earth_mars", frame_id="sun_ecliptic", time_budget_s=600.0)
+    planner, _ = nominal_planner("earth_mars", 600.0)
+    g.planner.set_plan(planner.plan)
+    link = RosLink("sun_ecliptic", 600.0)
+    ex = MultiThreadedExecutor(num_threads=4)
+    ex.add_node(g)
+    ex.add_node(link.node)
+    threading.Thread(target=ex.spin, daemon=True).start()
+    link.wait_connected()
+    rng = np.random.default_rng(1)
+    lat = []
+    for i in range(trials):
+        g.planner.set_plan(planner.plan)
+        p, v, m, t = perturbed_state("earth_mars", planner, rng, *PERTURB["earth_mars"])
+        t += i * 1e-3
+        level, dt = link.replan(p, v, m, t, f"e2e-{i}")
+        lat.append(dt * 1e3)
+    g.stop()
+    ex.shutdown(timeout_sec=2.0)
+    rclpy.try_shutdown()
+    print(f"end-to-end trigger -> schedule received (Earth-Mars, ROS 2 loopback): median "
+          f"{statistics.median(lat):.0f} ms, max {max(lat):.0f} ms over {trials}")
+
+
+if __name__ == "__main__":
+    main()

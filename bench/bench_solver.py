@@ -1,0 +1,58 @@
+"""Solver benchmark: wall and CPU time per acceptance case, iterations, the time split of the DDP
+(forward pass / expansion / backward sweep / Newton) and the share of stages served by polynomial
+evaluation, next to the C++ reference's CPU time measured on this machine type (issue #3).
+
+    .venv/bin/python bench/bench_solver.py [--all] [--method dyn]
+"""
+from __future__ import annotations
+
+import argparse
+import time
+
+import numpy as np
+
+from daddy_core.problem import problem_from_case
+from daddy_core.problems import load_case
+from daddy_core.solver import case_options, solve
+
+# (case, fuel-optimal, C++ reference CPU seconds, CasADi+IPOPT seconds) from issue #3
+CASES = [("earth_mars", False, 1.5, 0.43), ("earth_mars", True, 3.8, 1.1),
+         ("halo_l2_l1", True, 16.0, 11.1), ("dro_dro", True, 5.7, 2.3)]
+
+
+def run(name, fuel, method):
+    case = load_case(name)
+    prob = problem_from_case(case)
+    u0 = np.full((prob.N, 3), float(case.units.thrust(case.solver.get("u_guess_n", 1e-6))))
+    w0, c0 = time.perf_counter(), time.process_time()
+    sol = solve(prob, u0, method=method, fuel_optimal=fuel, options=case_options(case, fuel))
+    return sol, time.perf_counter() - w0, time.process_time() - c0
+
+
+def main():
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--all", action="store_true", help="include the CR3BP cases (minutes)")
+    ap.add_argument("--method", default="dyn")
+    args = ap.parse_args()
+    from bench_da import machine
+    print(f"machine: {machine()}")
+    hdr = (f"{'case':22s} {'conv':>4s} {'m_f kg':>9s} {'viol':>8s} {'wall s':>7s} {'cpu s':>7s} "
+           f"{'C++ s':>6s} {'ratio':>6s} {'DDP it':>6s} {'ms/it fwd/exp/bwd':>20s} {'newton s':>8s} "
+           f"{'poly':>5s}")
+    print(hdr)
+    for name, fuel, cpp, _ in CASES:
+        if name != "earth_mars" and not args.all:
+            continue
+        sol, wall, cpu = run(name, fuel, args.method)
+        it = max(sol.iterations["ddp"], 1)
+        rt = sol.runtime_s
+        split = "/".join(f"{1e3 * rt[k] / it:.0f}" for k in ("forward", "expansion", "backward"))
+        label = f"{name} {'fuel' if fuel else 'energy'}"
+        print(f"{label:22s} {str(sol.converged)[0]:>4s} {sol.final_mass_kg:9.3f} "
+              f"{sol.max_violation:8.1e} {wall:7.2f} {cpu:7.2f} {cpp:6.1f} {cpu / cpp:6.2f} "
+              f"{it:6d} {split:>20s} {rt['newton']:8.2f} {sol.polynomial_share:5.0%}", flush=True)
+    print("ratio = our CPU time / the C++ reference's CPU time (target <= 1, stretch <= 0.5)")
+
+
+if __name__ == "__main__":
+    main()
