@@ -46,6 +46,11 @@ class DirectLink:
         return plan.thrust_at(t_s) if plan else np.zeros(3)
 
 
+def _level(level) -> int:
+    """DiagnosticStatus.level is a byte in rclpy: as an int."""
+    return level[0] if isinstance(level, (bytes, bytearray)) else int(level)
+
+
 class RosLink:
     """Guidance over ROS 2 topics: the GNC side of the loop (estimates and requests out,
     schedules and diagnostics in)."""
@@ -87,7 +92,7 @@ class RosLink:
             for st in msg.status:
                 vals = {kv.key: kv.value for kv in st.values}
                 if "request_id" in vals:
-                    self.diags[vals["request_id"]] = (st.level, st.message)
+                    self.diags[vals["request_id"]] = (_level(st.level), st.message)
             self.cond.notify_all()
 
     def publish_estimate(self, pos, vel, mass, t_s):
@@ -97,10 +102,15 @@ class RosLink:
         self.pub_mass.publish(m)
         self.pub_state.publish(self.cv.state_to_odometry(pos, vel, t_s, self.frame_id))
 
-    def wait_connected(self, timeout_s=10.0):
+    def wait_connected(self, timeout_s=15.0):
+        """Poll (never a fixed sleep) until the guidance node subscribes to our topics and its
+        latched schedule has reached us."""
         end = time.monotonic() + timeout_s
         while time.monotonic() < end:
-            if (self.pub_state.get_subscription_count() and self.pub_req.get_subscription_count()
+            with self.cond:
+                have_schedule = self.schedule is not None
+            if (have_schedule and self.pub_state.get_subscription_count()
+                    and self.pub_req.get_subscription_count()
                     and self.pub_mass.get_subscription_count()):
                 return True
             time.sleep(0.05)
@@ -119,7 +129,7 @@ class RosLink:
         # wait for the schedule of this request (latched, stamped with the estimate time)
         with self.cond:
             while (self.schedule is None or self.schedule[0] < t_s - 1e-3) and \
-                    time.monotonic() < end and level[0] == 0:
+                    time.monotonic() < end and level[0] in (0, 1):
                 self.cond.wait(0.05)
         names = {0: "OK", 1: "WARN", 2: "ERROR"}
         return names.get(level[0], f"ERROR {level[1]}"), time.perf_counter() - t0
@@ -245,7 +255,7 @@ def _ros_demo(args, planner, errors, m_open, m0) -> int:
     from .guidance_node import GuidanceNode
     rclpy.init(signal_handler_options=SignalHandlerOptions.NO)
     guidance = GuidanceNode(scenario=args.case, time_budget_s=args.time_budget)
-    guidance.planner.set_plan(planner.plan)      # the nominal plan, anchored at T0
+    guidance.adopt_plan(planner.plan)            # the nominal plan, anchored at T0
     link = RosLink(guidance.frame_id, timeout_s=3 * args.time_budget + 30)
     executor = MultiThreadedExecutor(num_threads=4)
     executor.add_node(guidance)

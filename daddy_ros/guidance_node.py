@@ -249,6 +249,13 @@ class GuidanceNode(Node):
         with self._lock:
             self._last = (level, reason, bool(out is not None and out.ok))
 
+    def adopt_plan(self, plan) -> None:
+        """Make ``plan`` the current plan and publish it (e.g. a nominal computed elsewhere)."""
+        self.planner.set_plan(plan)
+        self._publish_plan(plan, plan.epoch_s)
+        self._diag("OK", "adopted a plan", {"request_id": plan.request_id or "adopted"},
+                   plan.epoch_s)
+
     # ------------------------------------------------------------------ outputs
     def _publish_plan(self, plan, stamp):
         self.pub_schedule.publish(cv.plan_to_joint_trajectory(plan, self.frame_id, stamp))

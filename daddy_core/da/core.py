@@ -301,25 +301,22 @@ class DA:
             derivs.append((-1.0) ** (j + 1) / j * inv ** j)
         return self.series(derivs)
 
-    def sin(self) -> "DA":
+    def _cyclic_series(self, phase: int) -> "DA":
+        """sin (phase 0) or cos (phase 1): the derivatives cycle through s, c, -s, -c."""
         s, c = np.sin(self.cons), np.cos(self.cons)
         cyc = (s, c, -s, -c)
         derivs = []
         fact = 1.0
         for j in range(self.order + 1):
             fact *= max(j, 1)
-            derivs.append(cyc[j % 4] / fact)
+            derivs.append(cyc[(j + phase) % 4] / fact)
         return self.series(derivs)
 
+    def sin(self) -> "DA":
+        return self._cyclic_series(0)
+
     def cos(self) -> "DA":
-        s, c = np.sin(self.cons), np.cos(self.cons)
-        cyc = (c, -s, -c, s)
-        derivs = []
-        fact = 1.0
-        for j in range(self.order + 1):
-            fact *= max(j, 1)
-            derivs.append(cyc[j % 4] / fact)
-        return self.series(derivs)
+        return self._cyclic_series(1)
 
     def tan(self) -> "DA":
         return self.sin() / self.cos()
