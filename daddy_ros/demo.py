@@ -92,7 +92,8 @@ class RosLink:
             for st in msg.status:
                 vals = {kv.key: kv.value for kv in st.values}
                 if "request_id" in vals:
-                    self.diags[vals["request_id"]] = (_level(st.level), st.message)
+                    self.diags[vals["request_id"]] = (_level(st.level), st.message,
+                                                      vals.get("plan_kept") == "no")
             self.cond.notify_all()
 
     def publish_estimate(self, pos, vel, mass, t_s):
@@ -125,11 +126,12 @@ class RosLink:
         with self.cond:
             while rid not in self.diags and time.monotonic() < end:
                 self.cond.wait(0.05)
-            level = self.diags.pop(rid, (None, "timeout"))
-        # wait for the schedule of this request (latched, stamped with the estimate time)
+            level = self.diags.pop(rid, (None, "timeout", False))
+        # when a new plan was stored, wait for its schedule (latched, stamped with the estimate
+        # time); otherwise the last valid schedule stays in force
         with self.cond:
-            while (self.schedule is None or self.schedule[0] < t_s - 1e-3) and \
-                    time.monotonic() < end and level[0] in (0, 1):
+            while level[2] and (self.schedule is None or self.schedule[0] < t_s - 1e-3) and \
+                    time.monotonic() < end:
                 self.cond.wait(0.05)
         names = {0: "OK", 1: "WARN", 2: "ERROR"}
         return names.get(level[0], f"ERROR {level[1]}"), time.perf_counter() - t0
