@@ -79,7 +79,7 @@ def daceypy_expansion(case, z0, dt, integrator):
                 x = x + (k1 + k2 * 2.0 + k3 * 2.0 + k4) * (h / 6)
             return x
         # RK78 on the same step sequence as ours (the step count is what matters for cost)
-        from daddy_core.integrators import RK78_A, RK78_B, RK78_C
+        from daddy_core.integrators import RK78_A, RK78_B
         stats = {}
         rk78(case.rhs(), z0[:7], z0[7:], 0.0, dt, tol=1e-13, stats=stats)
         h = dt / stats["steps"]

@@ -41,7 +41,7 @@ class _Model:
     def __init__(self, problem, X, U, active_tol):
         p = self.p = problem
         self.X, self.U = X, U
-        nx, nu, N = p.nx, p.nu, p.N
+        nx, _nu, N = p.nx, p.nu, p.N
         self.F = expand_dynamics(p, X[:-1], U, p.stage_dt)            # (nx, N)
         z = da.variables(np.concatenate([X[:-1].T, U.T]), order=2)
         g, ni = p.path_constraints(z[:nx], z[nx:], p.stage_dt)
