@@ -75,6 +75,13 @@ def _feedback_map(ak: np.ndarray, bk: np.ndarray) -> da.DA:
     return da.DA(c, T)
 
 
+def _cholesky(Quu: np.ndarray, rho: float, eye: np.ndarray):
+    try:
+        return cho_factor(Quu + rho * eye, lower=True, check_finite=True)
+    except (LinAlgError, ValueError):
+        return None
+
+
 def backward_sweep(st: Stages, sweep: str, rho: float) -> Gains | None:
     """One backward sweep; returns None when Q_uu + rho I is not positive definite."""
     p = st.problem
@@ -87,24 +94,27 @@ def backward_sweep(st: Stages, sweep: str, rho: float) -> Gains | None:
     dv1 = dv2 = 0.0
     eye = np.eye(nu)
     for k in range(N - 1, -1, -1):
+        J = fz[k]
+        Qz = st.lz[k] + J.T @ Vx                           # eq. 3, first-order terms
+        Qzz_gn = st.lzz[k] + J.T @ Vxx @ J                 # eq. 3 without dynamics Hessians
+        Qzz = Qzz_gn
         if sweep == "q":
             # Alg. 10: P_Q = P_l + P_V(P_f - x_{k+1}); derivatives read from its coefficients
-            fk = st.F[:, k] - st.X[k + 1]
-            pq = da.compose(_quadratic_da(Vx, Vxx), fk)
+            pq = da.compose(_quadratic_da(Vx, Vxx), st.F[:, k] - st.X[k + 1])
             Qz = st.lz[k] + pq.gradient()
             Qzz = st.lzz[k] + pq.hessian()
-        else:
-            J = fz[k]
-            Qz = st.lz[k] + J.T @ Vx                       # eq. 3, first-order terms
-            Qzz = st.lzz[k] + J.T @ Vxx @ J
-            if fzz is not None:                           # Alg. 9: + sum_i V_x^i f^i_zz
-                Qzz = Qzz + np.tensordot(Vx, fzz[k], axes=(0, 0))
+        elif fzz is not None:                              # Alg. 9: + sum_i V_x^i f^i_zz
+            Qzz = Qzz_gn + np.tensordot(Vx, fzz[k], axes=(0, 0))
         Qx, Qu = Qz[:nx], Qz[nx:]
-        Qxx, Qux, Quu = Qzz[:nx, :nx], Qzz[nx:, :nx], Qzz[nx:, nx:]
-        try:
-            cf = cho_factor(Quu + rho * eye, lower=True, check_finite=True)
-        except (LinAlgError, ValueError):
+        cf = _cholesky(Qzz[nx:, nx:], rho, eye)
+        if cf is None and Qzz is not Qzz_gn:
+            # the dynamics-Hessian terms make Q_uu indefinite at this stage (e.g. the mass-flow
+            # term |u| near zero thrust): use the Gauss-Newton Q of this stage instead
+            Qzz = Qzz_gn
+            cf = _cholesky(Qzz[nx:, nx:], rho, eye)
+        if cf is None:
             return None
+        Qxx, Qux, Quu = Qzz[:nx, :nx], Qzz[nx:, :nx], Qzz[nx:, nx:]
         ak = -cho_solve(cf, Qu)
         bk = -cho_solve(cf, Qux)
         a[k], b[k] = ak, bk
