@@ -78,7 +78,7 @@ def main():
 
 def end_to_end(trials: int = 5):
     """Trigger -> schedule received by another node, over ROS 2 on loopback (Earth-Mars)."""
-    os.environ.setdefault("ROS_AUTOMATIC_DISCOVERY_RANGE", "LOCALHOST")
+    os.environ["ROS_AUTOMATIC_DISCOVERY_RANGE"] = "LOCALHOST"  # the demo stays on loopback
     import threading
 
     import rclpy

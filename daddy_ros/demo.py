@@ -226,7 +226,7 @@ def main(argv=None) -> int:
     ap.add_argument("--no-errors", action="store_true", help="perfect navigation and execution")
     ap.add_argument("--plot", default="out/gnc_demo.png", help="PNG of flown vs planned")
     args = ap.parse_args(argv)
-    os.environ.setdefault("ROS_AUTOMATIC_DISCOVERY_RANGE", "LOCALHOST")
+    os.environ["ROS_AUTOMATIC_DISCOVERY_RANGE"] = "LOCALHOST"  # the demo stays on loopback
     errors = Errors(0, 0, 0, 0) if args.no_errors else Errors()
     print(f"closed-loop GNC demo: {args.case}, navigation errors {errors.nav_pos_m} m / "
           f"{errors.nav_vel_m_s * 1e3} mm/s, execution errors {errors.exec_mag:.0%} / "
