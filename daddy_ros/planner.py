@@ -249,14 +249,14 @@ class GuidancePlanner:
         try:
             sol = solve(problem, U_guess, method=self.method, fuel_optimal=None, polish=self.polish,
                         options=opts, case_name=self.case.name, duals=duals)
-            safe, feasible, why = self._assess(sol, problem)
+            safe, feasible, why, X, miss = self._assess(sol, problem)
             if not safe and self.polish:
                 # polishing an infeasible problem can push the thrust past its bound: fall back
                 # to the DDP result, which keeps the bound and minimises the terminal miss
                 sol = solve(problem, sol.U if np.all(np.isfinite(sol.U)) else U_guess,
                             method=self.method, fuel_optimal=None, polish=False, options=opts,
                             case_name=self.case.name)
-                safe, feasible, why = self._assess(sol, problem)
+                safe, feasible, why, X, miss = self._assess(sol, problem)
         except Exception as exc:  # a solver fault must never take the plan down
             return ReplanOutcome(False, "ERROR", f"solver raised {type(exc).__name__}: {exc}",
                                  request_id, time.perf_counter() - t0, None, warm_start=warm)
@@ -268,9 +268,10 @@ class GuidancePlanner:
                 sol2 = solve(full, sol.U if safe else U_guess, method=self.method,
                              fuel_optimal=None, polish=self.polish, options=opts,
                              case_name=self.case.name)
-                safe2, feasible2, why2 = self._assess(sol2, full)
-                if safe2 and (feasible2 or not safe):
-                    sol, problem, safe, feasible, why = sol2, full, safe2, feasible2, why2
+                assessed = self._assess(sol2, full)
+                if assessed[0] and (assessed[1] or not safe):
+                    sol, problem = sol2, full
+                    safe, feasible, why, X, miss = assessed
             except Exception:  # keep the derated result
                 pass
             dt = time.perf_counter() - t0
@@ -279,12 +280,12 @@ class GuidancePlanner:
         if not feasible and warm:
             # a best-effort plan replaces the current one only if it is predicted to miss less
             old_miss = self.terminal_miss(problem, U_guess)
-            if self.terminal_miss(problem, sol.U) >= old_miss:
+            if miss >= old_miss:
                 return ReplanOutcome(False, "WARN", f"kept the current plan: {why}, and no better "
                                      f"than flying it (miss {old_miss:.2e})", request_id, dt, None,
                                      sol.iterations, warm)
         plan = Plan(epoch_s=stamp_s, stage_dt_s=problem.stage_dt * self.units.tu_s,
-                    thrust_n=sol.U_newton.copy(), states_si=self.states_to_si(problem.rollout(sol.U)),
+                    thrust_n=sol.U_newton.copy(), states_si=self.states_to_si(X),
                     solution=sol, request_id=request_id, solve_time_s=dt, warm_start=warm,
                     max_violation=sol.max_violation)
         self.set_plan(plan)
@@ -297,40 +298,46 @@ class GuidancePlanner:
             level, reason = "WARN", f"solve took {dt:.3g} s, over the {self.time_budget_s:.3g} s budget"
         return ReplanOutcome(True, level, reason, request_id, dt, plan, sol.iterations, warm)
 
-    def _assess(self, sol: Solution, problem) -> tuple[bool, bool, str]:
-        """(safe to fly, meets every constraint, reason). Safe: finite and within the thrust
-        and mass bounds; feasible: also meets the terminal constraints.
+    def _assess(self, sol: Solution, problem):
+        """(safe to fly, meets every constraint, reason, X, terminal miss). Safe: finite and
+        within the thrust and mass bounds; feasible: also meets the terminal constraints. X is
+        the float rollout of the (saturated) controls, miss its max |terminal constraint|.
 
         Thrust magnitudes over the bound by at most SATURATION_SLACK (relative; solver
         tolerance) are saturated onto it in place -- the engine cannot do more anyway.
         """
         U = sol.U
         if not (np.all(np.isfinite(U)) and np.all(np.isfinite(sol.X))):
-            return False, False, "solution contains NaN or inf"
+            return False, False, "solution contains NaN or inf", None, np.inf
         umax = problem.u_max
         if umax is not None:
             mags = np.linalg.norm(U, axis=1)
             if np.max(mags) > umax * (1 + SATURATION_SLACK):
-                return False, False, "solution violates the thrust bound"
+                return False, False, "solution violates the thrust bound", None, np.inf
             over = mags > umax
             U[over] *= (umax / mags[over])[:, None]
         X = problem.rollout(U)
         if not np.all(np.isfinite(X)):
-            return False, False, "solution propagates to a non-finite state"
+            return False, False, "solution propagates to a non-finite state", None, np.inf
         g, ni = problem.path_constraints(X[:-1].T, U.T, problem.stage_dt)
         if g is not None and ni and np.max(g[:ni]) > 1e-6:
-            return False, False, f"solution violates a path constraint by {np.max(g[:ni]):.2e}"
-        gt, _ = problem.terminal_constraints(X[-1])
-        miss = float(np.max(np.abs(gt))) if gt is not None else 0.0
+            return (False, False, f"solution violates a path constraint by {np.max(g[:ni]):.2e}",
+                    None, np.inf)
+        miss = self._miss(problem, X)
         if miss > max(1e-6, 10 * self.options.tol_aul):
-            return True, False, f"terminal constraint missed by {miss:.2e} (normalised)"
-        return True, True, ""
+            return True, False, f"terminal constraint missed by {miss:.2e} (normalised)", X, miss
+        return True, True, "", X, miss
 
     @staticmethod
-    def terminal_miss(problem, U) -> float:
-        """Predicted max |terminal constraint| when flying U from the problem's x0."""
-        gt, _ = problem.terminal_constraints(problem.rollout(U)[-1])
+    def _miss(problem, X) -> float:
+        """max |terminal constraint| at the end of the trajectory X."""
+        gt, _ = problem.terminal_constraints(X[-1])
         return float(np.max(np.abs(gt))) if gt is not None else 0.0
+
+    @classmethod
+    def terminal_miss(cls, problem, U) -> float:
+        """Predicted max |terminal constraint| when flying U from the problem's x0."""
+        return cls._miss(problem, problem.rollout(U))
 
     # ------------------------------------------------------------------ nominal plans
     def load_plan(self, path: str | Path, epoch_s: float) -> Plan:

@@ -33,7 +33,6 @@ class TruthSim:
         self.x = self.case.x0.copy()        # normalised truth
         self.t_s = t0_s
         self.t0_s = t0_s
-        self.steps = 0
 
     @property
     def tof_s(self) -> float:
@@ -69,7 +68,6 @@ class TruthSim:
         un = self.units.thrust(u)
         self.x = rk78(self.rhs, self.x, un, 0.0, float(self.units.time(dt_s)), tol=1e-12)
         self.t_s += dt_s
-        self.steps += 1
         return u
 
     def miss(self):

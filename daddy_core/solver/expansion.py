@@ -95,22 +95,14 @@ class Stages:
         return self.problem.nx + self.problem.nu
 
     def _expand_costs(self):
-        p, m = self.problem, self.mult
+        p = self.problem
         z = da.variables(np.concatenate([self.X[:-1].T, self.U.T]), order=2)
-        x, u = z[:p.nx], z[p.nx:]
-        lt = p.stage_cost(x, u, p.stage_dt, self.hom)
-        g, _ = p.path_constraints(x, u, p.stage_dt)
-        if g is not None:
-            lt = lt + penalty(g, m.lam, m.mu, m.n_ineq)
+        lt = augmented_stage_cost(p, z[:p.nx], z[p.nx:], self.mult, self.hom)
         if not isinstance(lt, da.DA):  # a cost without any dependence on (x, u)
             lt = da.constant(lt, self.n) + z[0] * 0.0
         self.lz = lt.gradient()
         self.lzz = lt.hessian()
-        xn = da.variables(self.X[-1], order=2)
-        phi = p.terminal_cost(xn, p.x_target)
-        gt, _ = p.terminal_constraints(xn)
-        if gt is not None:
-            phi = phi + penalty(gt, m.lam_t, m.mu_t, m.n_tineq)
+        phi = augmented_terminal_cost(p, da.variables(self.X[-1], order=2), self.mult)
         self.phix = phi.gradient()
         self.phixx = phi.hessian()
         self.cost = float(np.sum(lt.cons) + phi.cons)
@@ -130,19 +122,24 @@ def expand_dynamics(problem, X: np.ndarray, U: np.ndarray, dt: np.ndarray):
     return problem.step(z[:problem.nx], z[problem.nx:], dt)
 
 
-def augmented_cost(problem, X, U, mult: Multipliers, hom) -> float:
-    """Augmented cost J~ of a trajectory in floats (the forward pass's J*)."""
-    x, u = X[:-1].T, U.T
+def augmented_stage_cost(problem, x, u, mult: Multipliers, hom):
+    """l~ (eq. 8) of every stage, (N,): floats or DA alike."""
     lt = problem.stage_cost(x, u, problem.stage_dt, hom)
     g, _ = problem.path_constraints(x, u, problem.stage_dt)
-    total = float(np.sum(lt))
-    if g is not None:
-        total += float(np.sum(penalty(g, mult.lam, mult.mu, mult.n_ineq)))
-    total += float(problem.terminal_cost(X[-1], problem.x_target))
-    gt, _ = problem.terminal_constraints(X[-1])
-    if gt is not None:
-        total += float(penalty(gt, mult.lam_t, mult.mu_t, mult.n_tineq))
-    return total
+    return lt if g is None else lt + penalty(g, mult.lam, mult.mu, mult.n_ineq)
+
+
+def augmented_terminal_cost(problem, xn, mult: Multipliers):
+    """phi~ (eq. 8) at the final state: float or DA alike."""
+    phi = problem.terminal_cost(xn, problem.x_target)
+    gt, _ = problem.terminal_constraints(xn)
+    return phi if gt is None else phi + penalty(gt, mult.lam_t, mult.mu_t, mult.n_tineq)
+
+
+def augmented_cost(problem, X, U, mult: Multipliers, hom) -> float:
+    """Augmented cost J~ of a trajectory in floats (the forward pass's J*)."""
+    return float(np.sum(augmented_stage_cost(problem, X[:-1].T, U.T, mult, hom))
+                 + augmented_terminal_cost(problem, X[-1], mult))
 
 
 def constraint_values(problem, X, U):

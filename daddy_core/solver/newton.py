@@ -21,7 +21,7 @@ import scipy.sparse as sp
 from scipy.linalg import LinAlgError, cho_solve_banded, cholesky_banded
 
 from .. import da
-from .expansion import expand_dynamics, max_violation
+from .expansion import expand_dynamics, total_violation
 
 
 @dataclass
@@ -228,7 +228,5 @@ def polish(problem, X, U, opts, deadline: float | None = None) -> PolishResult:
         return PolishResult(X0, U0, np.inf, False, False, it, reason)
     dbest, Xb, Ub = best
     # report the violation of all constraints (inactive inequalities included)
-    g, ni = problem.path_constraints(Xb[:-1].T, Ub.T, problem.stage_dt)
-    gt, nti = problem.terminal_constraints(Xb[-1])
-    viol = max(dbest, max_violation(g, ni), max_violation(gt, nti))
+    viol = max(dbest, total_violation(problem, Xb, Ub))
     return PolishResult(Xb, Ub, viol, viol <= opts.tol_newton, True, it, reason)
