@@ -6,10 +6,12 @@ newest state. See msg_docs/ for the interface contract.
 """
 from __future__ import annotations
 
+import math
 import os
 import signal
 import threading
 import time
+from collections import deque
 from pathlib import Path
 
 import rclpy
@@ -31,7 +33,10 @@ from trajectory_msgs.msg import JointTrajectory
 from daddy_core.solver import METHODS
 
 from . import conversions as cv
-from .planner import GuidancePlanner, InputRejected
+from daddy_core.errors import DaddyError
+from daddy_core.problems import list_cases, load_case
+
+from .planner import FUTURE_TOLERANCE_S, GuidancePlanner, InputRejected
 
 LATCHED = QoSProfile(depth=1, reliability=ReliabilityPolicy.RELIABLE,
                      durability=DurabilityPolicy.TRANSIENT_LOCAL, history=HistoryPolicy.KEEP_LAST)
@@ -51,6 +56,8 @@ PARAMETERS = {  # name: (default, description)
     "frame_id": ("earth_moon_rotating", "frame of state estimates and thrust"),
     "plan_file": ("", "nominal plan (solution JSON) adopted at the first estimate; empty: the "
                       "bundled nominal of the scenario if any, else a cold solve on request"),
+    "persist_file": ("", "the current plan is written here after every new plan and restored "
+                         "from here at start-up (crash recovery); empty: no persistence"),
     "state_topic": ("state_estimate", "nav_msgs/Odometry input"),
     "mass_topic": ("mass_estimate", "geometry_msgs/InertiaStamped input (kg)"),
     "request_topic": ("replan_request", "std_msgs/Header input: frame_id = request id"),
@@ -59,6 +66,7 @@ PARAMETERS = {  # name: (default, description)
     "path_topic": ("planned_path", "nav_msgs/Path output (m)"),
 }
 PLANS_DIR = Path(__file__).with_name("plans")
+STATE_HISTORY = 64   # accepted estimates kept to serve requests stamped in their past
 
 
 class GuidanceNode(Node):
@@ -78,7 +86,7 @@ class GuidanceNode(Node):
         self.plan_file = g("plan_file") or self._bundled_plan()
         self._lock = threading.Lock()
         self._wake = threading.Condition(self._lock)
-        self._state = None          # (pos, vel, stamp)
+        self._states = deque(maxlen=STATE_HISTORY)   # accepted (pos, vel, stamp), arrival order
         self._mass = None
         self._pending = None        # (request_id, request_stamp) awaiting a solve
         self._busy = False
@@ -88,6 +96,9 @@ class GuidanceNode(Node):
         self._stop = False
         self.replans = 0
         self.coalesced = 0
+        self.rejected = 0           # estimates rejected at arrival
+        self.persist_file = g("persist_file")
+        self._replan_on_first_estimate = False
 
         sub_group = MutuallyExclusiveCallbackGroup()
         self.create_subscription(Odometry, g("state_topic"), self._on_state,
@@ -104,6 +115,8 @@ class GuidanceNode(Node):
         self.pub_diag = self.create_publisher(DiagnosticArray, "/diagnostics", RELIABLE)
         self._worker = threading.Thread(target=self._work, name="daddy_replan", daemon=True)
         self._worker.start()
+        if self.persist_file and Path(self.persist_file).exists():
+            self._restore()
         self.get_logger().info(f"daddy_guidance ready: scenario {self.planner.case.name}, "
                                f"method {self.planner.method}, frame {self.frame_id}")
 
@@ -114,47 +127,118 @@ class GuidanceNode(Node):
         return str(p) if p.exists() and not self.get_parameter("stages").value else ""
 
     def _on_set_parameters(self, params):
+        """Runtime updates: time_budget_s and staleness_s (positive finite floats); every other
+        declared parameter is read-only after start-up. A rejected update changes nothing."""
+        why = next((r for r in map(self._parameter_problem, params) if r), None)
+        if why:
+            self._diag("WARN", f"parameter update rejected: {why}", {"field": "parameters"}, None)
+            return SetParametersResult(successful=False, reason=why)
         for p in params:
             if p.name == "time_budget_s":
-                if not isinstance(p.value, float) or not p.value > 0:
-                    return SetParametersResult(successful=False,
-                                               reason="time_budget_s must be a positive float")
                 self.planner.time_budget_s = p.value
                 self.planner.options = self.planner.options.with_(time_budget_s=p.value)
                 self.planner.replan_options = self.planner.replan_options.with_(time_budget_s=p.value)
             elif p.name == "staleness_s":
-                if not isinstance(p.value, float) or not p.value > 0:
-                    return SetParametersResult(successful=False,
-                                               reason="staleness_s must be a positive float")
                 self.planner.staleness_s = p.value
-            elif p.name in PARAMETERS and self.has_parameter(p.name):
-                return SetParametersResult(successful=False,
-                                           reason=f"{p.name} is read-only after start-up")
         return SetParametersResult(successful=True)
 
+    def _parameter_problem(self, p) -> str:
+        if p.name in ("time_budget_s", "staleness_s"):
+            if not (isinstance(p.value, float) and math.isfinite(p.value) and p.value > 0):
+                return f"{p.name} must be a positive finite float, got {p.value!r}"
+            return ""
+        if p.name == "scenario" and isinstance(p.value, str):
+            try:
+                load_case(p.value)
+            except DaddyError:
+                return (f"scenario {p.value!r} is unknown (known: {', '.join(list_cases())}); "
+                        "scenario is also read-only after start-up")
+        if p.name in PARAMETERS and self.has_parameter(p.name):
+            return f"{p.name} is read-only after start-up"
+        return ""
+
     # ------------------------------------------------------------------ inputs
+    def _reject(self, topic: str, reason: str, stamp: float) -> None:
+        """An input that is not used: ERROR diagnostic naming the field; nothing else changes."""
+        self.rejected += 1
+        self._diag("ERROR", f"input rejected: {reason}", {"topic": topic, "stamp_s": f"{stamp:.9f}"},
+                   stamp if math.isfinite(stamp) and stamp > 0 else None, log_every_s=1.0)
+
     def _on_state(self, msg: Odometry):
         pos, vel, stamp, frame = cv.odometry_to_state(msg)
         if frame != self.frame_id:
-            self._diag("ERROR", f"state_estimate.header.frame_id {frame!r} is not {self.frame_id!r}",
-                       {"field": "header.frame_id"}, stamp)
+            self._reject("state_estimate", f"state_estimate.header.frame_id {frame!r} is not "
+                         f"{self.frame_id!r}", stamp)
+            return
+        try:
+            self.planner.check_estimate(pos, vel, stamp)
+        except InputRejected as exc:
+            self._reject("state_estimate", str(exc), stamp)
             return
         with self._lock:
-            self._state = (pos, vel, stamp)
+            self._states.append((pos, vel, stamp))
         plan = self.planner.plan or self._adopt_nominal()
         if plan is not None:
             self.pub_thrust.publish(cv.thrust_command(plan.thrust_at(stamp), stamp, self.frame_id))
+        self._maybe_replan_after_restart()
 
     def _on_mass(self, msg: InertiaStamped):
+        mass, stamp = float(msg.inertia.m), cv.stamp_to_s(msg.header.stamp)
+        try:
+            self.planner.check_mass(mass, stamp)
+        except InputRejected as exc:
+            self._reject("mass_estimate", str(exc), stamp)
+            return
         with self._lock:
-            self._mass = float(msg.inertia.m)
+            self._mass = mass
         if self.planner.plan is None:
             self._adopt_nominal()
+        self._maybe_replan_after_restart()
+
+    def _maybe_replan_after_restart(self):
+        with self._lock:
+            go = self._replan_on_first_estimate and self._states and self._mass is not None
+            if go:
+                self._replan_on_first_estimate = False
+        if go:
+            self._enqueue("restart", None)
+
+    def _restore(self):
+        """Start-up after a crash: adopt the persisted plan and re-plan at the first estimate."""
+        try:
+            plan = self.planner.restore_plan(self.persist_file)
+        except DaddyError as exc:
+            self._diag("ERROR", f"persist_file not restored: {exc}", {"field": "persist_file"}, None)
+            return
+        self._publish_plan(plan, None)
+        self._replan_on_first_estimate = True
+        self._diag("WARN", f"restored the persisted plan (epoch {plan.epoch_s:.3f} s); re-planning "
+                   "at the first estimate", {"request_id": "restored"}, plan.epoch_s)
+
+    def _latest_state(self):
+        with self._lock:
+            return self._states[-1] if self._states else None
+
+    def _state_for(self, request_stamp: float | None):
+        """The estimate a request is served from: the newest received (service requests), or the
+        newest stamped at most FUTURE_TOLERANCE_S after the request stamp (topic requests).
+        Raises InputRejected when every stored estimate is in the request's future."""
+        with self._lock:
+            states = list(self._states)
+        if not states or request_stamp is None:
+            return states[-1] if states else None
+        usable = [s for s in states if s[2] <= request_stamp + FUTURE_TOLERANCE_S]
+        if not usable:
+            ahead = min(s[2] for s in states) - request_stamp
+            raise InputRejected(f"every state_estimate is in the future of the request stamp "
+                                f"(the oldest by {ahead:.3g} s)")
+        return max(usable, key=lambda s: s[2])
 
     def _adopt_nominal(self):
         """Adopt the nominal plan at the first estimate (state and mass both received)."""
+        state = self._latest_state()
         with self._lock:
-            state, mass, plan_file = self._state, self._mass, self.plan_file
+            mass, plan_file = self._mass, self.plan_file
         if not plan_file or state is None or mass is None:
             return None
         stamp = state[2]
@@ -206,9 +290,9 @@ class GuidanceNode(Node):
                 self._pending = None
                 self._busy = True
                 self._n_started += 1
-                state, mass = self._state, self._mass
+                mass = self._mass
             try:
-                self._replan_once(request_id, request_stamp, state, mass)
+                self._replan_once(request_id, request_stamp, mass)
             except Exception as exc:  # never let the worker die
                 self._finish(request_id, None, "ERROR", f"internal error: {exc!r}", None)
             finally:
@@ -217,27 +301,41 @@ class GuidanceNode(Node):
                     self._n_finished += 1
                     self._wake.notify_all()
 
-    def _replan_once(self, request_id, request_stamp, state, mass):
-        now = request_stamp if request_stamp is not None else (state[2] if state else 0.0)
+    def _replan_once(self, request_id, request_stamp, mass):
+        started = {"solve_start_unix_s": f"{time.time():.6f}"}
+        try:
+            state = self._state_for(request_stamp)
+        except InputRejected as exc:
+            self._finish(request_id, None, "ERROR", f"input rejected: {exc}", request_stamp, started)
+            return
+        now = request_stamp if request_stamp is not None else (state[2] if state else None)
         if state is None or mass is None:
-            self._finish(request_id, None, "ERROR", "no state_estimate and mass_estimate yet", now)
+            self._finish(request_id, None, "ERROR", "no valid state_estimate and mass_estimate yet",
+                         now, started)
             return
         pos, vel, stamp = state
+        started["state_stamp_s"] = f"{stamp:.9f}"
         try:
             out = self.planner.replan(pos, vel, mass, stamp, request_id,
                                       now_s=request_stamp if request_stamp is not None else None)
         except InputRejected as exc:
-            self._finish(request_id, None, "ERROR", f"input rejected: {exc}", now)
+            self._finish(request_id, None, "ERROR", f"input rejected: {exc}", now, started)
             return
         self.replans += 1
-        self._finish(request_id, out, out.level, out.reason, stamp)
+        if out.ok and self.persist_file:
+            try:
+                self.planner.save_plan(self.persist_file)
+            except OSError as exc:
+                out.level, out.reason = "WARN", f"{out.reason}; persist_file not written: {exc}"
+        self._finish(request_id, out, out.level, out.reason, stamp, started)
 
-    def _finish(self, request_id, out, level, reason, stamp):
+    def _finish(self, request_id, out, level, reason, stamp, extra=None):
         plan = self.planner.plan
         if plan is not None:
             self._publish_plan(plan, stamp if out is not None and out.ok else None)
         values = {"request_id": request_id, "method": self.planner.method,
-                  "warm_start": "yes" if out is not None and out.warm_start else "no"}
+                  "warm_start": "yes" if out is not None and out.warm_start else "no",
+                  **(extra or {})}
         if out is not None:
             values.update({"solve_time_s": f"{out.solve_time_s:.4f}",
                            "iterations": str(out.iterations),
@@ -261,10 +359,15 @@ class GuidanceNode(Node):
         self.pub_schedule.publish(cv.plan_to_joint_trajectory(plan, self.frame_id, stamp))
         self.pub_path.publish(cv.plan_to_path(plan, self.frame_id))
 
-    def _diag(self, level, message, values, stamp):
-        self.pub_diag.publish(cv.diagnostics(level, message, values, stamp or 0.0))
+    def _diag(self, level, message, values, stamp, log_every_s=None):
+        """Publish one DiagnosticStatus; non-OK ones are also logged (at most once per
+        log_every_s seconds when given, so a flood of bad inputs does not flood the log)."""
+        if stamp is None:   # no message time to refer to: the node's clock
+            stamp = self.get_clock().now().nanoseconds * 1e-9
+        self.pub_diag.publish(cv.diagnostics(level, message, values, stamp))
         if level != "OK":
-            self.get_logger().warning(f"{level}: {message}")
+            kw = {"throttle_duration_sec": log_every_s} if log_every_s else {}
+            self.get_logger().warning(f"{level}: {message}", **kw)
 
     def stop(self):
         with self._lock:

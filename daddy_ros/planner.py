@@ -6,7 +6,9 @@ Times are seconds on the caller's clock (message stamps); states are SI in the p
 """
 from __future__ import annotations
 
+import json
 import math
+import os
 import threading
 import time
 from dataclasses import dataclass, field, replace
@@ -23,8 +25,11 @@ from daddy_core.solver import Solution, case_options, solve
 MIN_STAGE_FRACTION = 0.25
 # clock comparisons: times closer than this to a stage boundary count as on it [s]
 TIME_TOLERANCE_S = 1e-6
+# an estimate stamped up to this much after the request time is still usable [s]
+FUTURE_TOLERANCE_S = 1.0
 # relative thrust-bound excess (solver tolerance) saturated onto the bound rather than rejected
 SATURATION_SLACK = 1e-3
+PLAN_FORMAT = "daddy-plan-1"
 
 
 class InputRejected(DaddyError):
@@ -148,14 +153,21 @@ class GuidancePlanner:
         return out
 
     # ------------------------------------------------------------------ input checks
-    def check_state(self, pos_m, vel_m_s, mass_kg, stamp_s: float, now_s: float | None = None):
-        """Raise InputRejected (naming the field) for an estimate the planner must not use."""
+    def check_estimate(self, pos_m, vel_m_s, stamp_s: float) -> None:
+        """Raise InputRejected (naming the field) for a state estimate that cannot be used at any
+        time: non-finite, unset stamp, or outside the scenario's domain."""
         pos = np.asarray(pos_m, dtype=float)
         vel = np.asarray(vel_m_s, dtype=float)
         if pos.shape != (3,) or not np.all(np.isfinite(pos)):
             raise InputRejected("state_estimate.pose.pose.position is not 3 finite numbers")
         if vel.shape != (3,) or not np.all(np.isfinite(vel)):
             raise InputRejected("state_estimate.twist.twist.linear is not 3 finite numbers")
+        self._check_stamp(stamp_s, "state_estimate")
+        u = self.units
+        self._check_domain(np.concatenate([u.length(pos), u.speed(vel)]))
+
+    def check_mass(self, mass_kg, stamp_s: float | None = None) -> None:
+        """Raise InputRejected unless dry mass < mass_kg <= wet mass (+ tolerance)."""
         if mass_kg is None or not math.isfinite(mass_kg):
             raise InputRejected("mass_estimate.inertia.m is missing or not finite")
         sc = self.case.spacecraft
@@ -165,17 +177,29 @@ class GuidancePlanner:
         if mass_kg > sc.wet_mass_kg + self.mass_tolerance_kg:
             raise InputRejected(f"mass_estimate.inertia.m = {mass_kg:.6g} kg exceeds the wet mass "
                                 f"{sc.wet_mass_kg:.6g} kg")
-        if not math.isfinite(stamp_s):
-            raise InputRejected("header.stamp is not finite")
+        if stamp_s is not None:
+            self._check_stamp(stamp_s, "mass_estimate")
+
+    @staticmethod
+    def _check_stamp(stamp_s: float, topic: str) -> None:
+        if not math.isfinite(stamp_s) or stamp_s <= 0.0:
+            raise InputRejected(f"{topic}.header.stamp is unset, negative or not finite "
+                                f"({stamp_s!r} s)")
+
+    def check_state(self, pos_m, vel_m_s, mass_kg, stamp_s: float, now_s: float | None = None):
+        """All checks of one estimate used at time now_s; returns the normalised state (7,).
+        Raises InputRejected (naming the field) for an estimate the planner must not use."""
+        self.check_estimate(pos_m, vel_m_s, stamp_s)
+        self.check_mass(mass_kg)
         if now_s is not None:
-            if stamp_s > now_s + 1.0:
-                raise InputRejected(f"header.stamp is {stamp_s - now_s:.3g} s in the future")
+            if stamp_s > now_s + FUTURE_TOLERANCE_S:
+                raise InputRejected(f"state_estimate.header.stamp is {stamp_s - now_s:.3g} s in "
+                                    "the future of the request")
             if now_s - stamp_s > self.staleness_s:
-                raise InputRejected(f"header.stamp is stale ({now_s - stamp_s:.3g} s old, bound "
-                                    f"{self.staleness_s:.3g} s)")
-        x = self.state_to_normalised(pos, vel, mass_kg)
-        self._check_domain(x)
-        return x
+                raise InputRejected(f"state_estimate.header.stamp is stale ({now_s - stamp_s:.3g}"
+                                    f" s old, bound staleness_s = {self.staleness_s:.3g} s)")
+        return self.state_to_normalised(np.asarray(pos_m, float), np.asarray(vel_m_s, float),
+                                        mass_kg)
 
     def _check_domain(self, x: np.ndarray) -> None:
         sys = self.case.system
@@ -185,14 +209,14 @@ class GuidancePlanner:
             moon_radius = 1737.4 / self.units.lu_km
             earth_radius = 6378.1 / self.units.lu_km
             if np.linalg.norm(r - [1 - mu, 0, 0]) < moon_radius:
-                raise InputRejected("state_estimate position is inside the Moon")
+                raise InputRejected("state_estimate.pose.pose.position is inside the Moon")
             if np.linalg.norm(r + [mu, 0, 0]) < earth_radius:
-                raise InputRejected("state_estimate position is inside the Earth")
+                raise InputRejected("state_estimate.pose.pose.position is inside the Earth")
             if np.linalg.norm(r) > 5.0 or np.linalg.norm(x[3:6]) > 10.0:
-                raise InputRejected("state_estimate is far outside the Earth-Moon domain")
+                raise InputRejected("state_estimate (position or velocity) is far outside the Earth-Moon domain")
         elif sys == "sun_two_body":
             if not 0.05 < np.linalg.norm(r) < 50.0 or np.linalg.norm(x[3:6]) > 10.0:
-                raise InputRejected("state_estimate is outside the heliocentric domain")
+                raise InputRejected("state_estimate (position or velocity) is outside the heliocentric domain")
 
     # ------------------------------------------------------------------ shift (warm start)
     def shifted_problem(self, plan: Plan | None, t_s: float, x0: np.ndarray):
@@ -348,5 +372,42 @@ class GuidancePlanner:
                              f"{self.base_problem.N}")
         plan = Plan(epoch_s, sol.stage_dt * self.units.tu_s, sol.U_newton.copy(),
                     self.states_to_si(sol.X), sol, "nominal", 0.0, False, sol.max_violation)
+        self.set_plan(plan)
+        return plan
+
+    # ------------------------------------------------------------------ persistence
+    def save_plan(self, path: str | Path) -> None:
+        """Write the current plan (epoch, provenance and solution) atomically to ``path``."""
+        plan = self.plan
+        if plan is None:
+            return
+        data = {"format": PLAN_FORMAT, "scenario": self.case.name, "epoch_s": plan.epoch_s,
+                "request_id": plan.request_id, "solution": plan.solution.to_dict()}
+        path = Path(path)
+        tmp = path.with_name(path.name + ".tmp")
+        tmp.write_text(json.dumps(data, allow_nan=False))
+        os.replace(tmp, path)   # a crash mid-write leaves the previous file intact
+
+    def restore_plan(self, path: str | Path) -> Plan:
+        """Adopt a plan written by ``save_plan`` (same scenario; its epoch is kept). Raises
+        DaddyError naming what is wrong with the file."""
+        try:
+            data = json.loads(Path(path).read_text())
+            sol = Solution.from_dict(data["solution"])
+            epoch = float(data["epoch_s"])
+        except (OSError, ValueError, KeyError, TypeError) as exc:
+            raise DaddyError(f"persisted plan {path}: unreadable ({exc!r})") from exc
+        if data.get("format") != PLAN_FORMAT or data.get("scenario") != self.case.name:
+            raise DaddyError(f"persisted plan {path} is not a {PLAN_FORMAT} plan of scenario "
+                             f"{self.case.name!r}")
+        thrust = sol.U_newton
+        if not (math.isfinite(epoch) and 1 <= len(thrust) <= self.base_problem.N
+                and np.all(np.isfinite(thrust)) and np.all(np.isfinite(sol.X))):
+            raise DaddyError(f"persisted plan {path} has a bad epoch, stage count or values")
+        if np.max(np.linalg.norm(thrust, axis=1)) > \
+                self.case.spacecraft.max_thrust_n * (1 + SATURATION_SLACK):
+            raise DaddyError(f"persisted plan {path} violates the thrust bound")
+        plan = Plan(epoch, sol.stage_dt * self.units.tu_s, thrust.copy(), self.states_to_si(sol.X),
+                    sol, str(data.get("request_id", "restored")), 0.0, False, sol.max_violation)
         self.set_plan(plan)
         return plan

@@ -140,40 +140,52 @@ def test_nominal_then_replan_publishes_valid_schedule(graph):
     assert np.all(np.diff(starts) > 0) and starts[0] == pytest.approx(0.0)
 
 
-@pytest.mark.parametrize("case", ["nan", "frame", "negative_mass", "future", "inside_sun"])
-def test_malformed_inputs_get_diagnostics_and_keep_plan(graph, case):
+@pytest.mark.parametrize("case", ["nan", "frame", "negative_mass", "inside_sun", "unset_stamp"])
+def test_malformed_estimates_rejected_at_arrival_and_plan_kept(graph, case):
     node, c = graph
     plan_before = node.planner.plan
     assert plan_before is not None
     pos, vel, mass = truth_at_start()
     t = plan_before.epoch_s + 10.0
-    rid = f"bad-{case}"
+    n0 = len(c.diags)
+    expect = {"nan": "position", "frame": "frame_id", "negative_mass": "inertia.m",
+              "inside_sun": "heliocentric", "unset_stamp": "header.stamp"}[case]
     if case == "nan":
         c.send_state(pos * math.nan, vel, mass, t)
     elif case == "frame":
-        n0 = len(c.diags)
         c.send_state(pos, vel, mass, t, frame="map")
-        got = c.wait_for(lambda: [d for d in c.diags[n0:] if "frame_id" in d.status[0].message], 10)
-        assert got and got[0].status[0].level == DiagnosticStatus.ERROR
-        assert node.planner.plan is plan_before
-        return
     elif case == "negative_mass":
         c.send_state(pos, vel, -5.0, t)
-    elif case == "future":
-        c.send_state(pos, vel, mass, t + 1e5)
     elif case == "inside_sun":
         c.send_state(pos * 1e-3, vel, mass, t)
-    time.sleep(0.1)
-    c.request(rid, t)
+    elif case == "unset_stamp":
+        c.send_state(pos, vel, mass, 0.0)
+    got = c.wait_for(lambda: [d.status[0] for d in c.diags[n0:] if expect in d.status[0].message],
+                     10)
+    assert got, f"no diagnostic naming {expect!r}"
+    assert got[0].level == DiagnosticStatus.ERROR and "rejected" in got[0].message
+    assert node.planner.plan is plan_before  # the last valid plan is kept
+    _, u = cv.joint_trajectory_to_schedule(c.schedules[-1])
+    assert np.all(np.isfinite(u))
+
+
+@pytest.mark.parametrize("case", ["future", "stale"])
+def test_requests_without_a_usable_estimate_are_rejected(graph, case):
+    node, c = graph
+    plan_before = node.planner.plan
+    pos, vel, mass = truth_at_start()
+    t = plan_before.epoch_s + 10.0
+    c.send_state(pos, vel, mass, t)
+    assert c.wait_for(lambda: [m for m in c.thrust if cv.stamp_to_s(m.header.stamp) >= t - 1e-3],
+                      10)
+    rid = f"bad-{case}"
+    # future: the request predates every stored estimate; stale: it is far after the newest
+    c.request(rid, 1.0 if case == "future" else t + 10 * node.planner.staleness_s)
     got = c.wait_for(lambda: c.diag_for(rid), 30)
     assert got, f"no diagnostics for {rid}"
     st, _ = got
-    assert st.level == DiagnosticStatus.ERROR
-    assert "rejected" in st.message
-    assert node.planner.plan is plan_before  # the last valid plan is kept
-    last = c.schedules[-1]
-    _, u = cv.joint_trajectory_to_schedule(last)
-    assert np.all(np.isfinite(u))
+    assert st.level == DiagnosticStatus.ERROR and case in st.message, st.message
+    assert node.planner.plan is plan_before
 
 
 def test_trigger_service_answers(graph):
