@@ -17,7 +17,7 @@ export ROS_DOMAIN_ID ?= $(shell echo $$(( $$$$ % 100 + 100 )))
 export ROS_LOG_DIR ?= $(shell mktemp -d /tmp/daddy-roslog.XXXXXX)
 export ROS_PYTHON_CHECK_FIELDS := 1
 
-.PHONY: demo test test-slow bench monte-carlo venv clean
+.PHONY: demo test test-slow bench monte-carlo reliability venv clean
 
 venv: $(STAMP)
 
@@ -47,6 +47,9 @@ test-slow: $(STAMP)
 
 monte-carlo: $(STAMP)
 	$(VENV)/bin/gnc_demo --case $(DEMO_CASE) --runs $(or $(RUNS),100)
+
+reliability: $(STAMP)
+	$(VENV)/bin/daddy_reliability $(if $(QUICK),--quick)
 
 bench: $(STAMP)
 	cd bench && ../$(PY) bench_da.py && ../$(PY) bench_solver.py && ../$(PY) bench_replan.py

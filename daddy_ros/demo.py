@@ -75,6 +75,7 @@ class RosLink:
         self.pub_mass = self.node.create_publisher(InertiaStamped, "mass_estimate", RELIABLE)
         self.pub_req = self.node.create_publisher(Header, "replan_request", RELIABLE)
         self.schedule = None
+        self.n_schedules = 0
         self.diags = {}
         self.cond = threading.Condition()
         self.node.create_subscription(JointTrajectory, "control_schedule", self._on_schedule, LATCHED)
@@ -85,6 +86,7 @@ class RosLink:
         t, u = self.cv.joint_trajectory_to_schedule(msg)
         with self.cond:
             self.schedule = (self.cv.stamp_to_s(msg.header.stamp), t, u)
+            self.n_schedules += 1
             self.cond.notify_all()
 
     def _on_diag(self, msg):

@@ -9,6 +9,7 @@ from __future__ import annotations
 import math
 import os
 import signal
+import sys
 import threading
 import time
 from collections import deque
@@ -215,6 +216,16 @@ class GuidanceNode(Node):
         self._diag("WARN", f"restored the persisted plan (epoch {plan.epoch_s:.3f} s); re-planning "
                    "at the first estimate", {"request_id": "restored"}, plan.epoch_s)
 
+    def _persist(self) -> str:
+        """Write the current plan to persist_file (if set); returns a problem or ''."""
+        if not self.persist_file:
+            return ""
+        try:
+            self.planner.save_plan(self.persist_file)
+        except (OSError, ValueError) as exc:
+            return f"persist_file not written: {exc}"
+        return ""
+
     def _latest_state(self):
         with self._lock:
             return self._states[-1] if self._states else None
@@ -249,6 +260,7 @@ class GuidanceNode(Node):
             self.plan_file = ""
             return None
         self._publish_plan(plan, stamp)
+        self._persist()
         self._diag("OK", f"adopted nominal plan {Path(plan_file).name}", {"request_id": "nominal"},
                    stamp)
         return plan
@@ -322,11 +334,10 @@ class GuidanceNode(Node):
             self._finish(request_id, None, "ERROR", f"input rejected: {exc}", now, started)
             return
         self.replans += 1
-        if out.ok and self.persist_file:
-            try:
-                self.planner.save_plan(self.persist_file)
-            except OSError as exc:
-                out.level, out.reason = "WARN", f"{out.reason}; persist_file not written: {exc}"
+        if out.ok:
+            why = self._persist()
+            if why:
+                out.level, out.reason = "WARN", f"{out.reason}; {why}"
         self._finish(request_id, out, out.level, out.reason, stamp, started)
 
     def _finish(self, request_id, out, level, reason, stamp, extra=None):
@@ -351,6 +362,7 @@ class GuidanceNode(Node):
         """Make ``plan`` the current plan and publish it (e.g. a nominal computed elsewhere)."""
         self.planner.set_plan(plan)
         self._publish_plan(plan, plan.epoch_s)
+        self._persist()
         self._diag("OK", "adopted a plan", {"request_id": plan.request_id or "adopted"},
                    plan.epoch_s)
 
@@ -365,9 +377,11 @@ class GuidanceNode(Node):
         if stamp is None:   # no message time to refer to: the node's clock
             stamp = self.get_clock().now().nanoseconds * 1e-9
         self.pub_diag.publish(cv.diagnostics(level, message, values, stamp))
-        if level != "OK":
-            kw = {"throttle_duration_sec": log_every_s} if log_every_s else {}
-            self.get_logger().warning(f"{level}: {message}", **kw)
+        # rclpy fixes a call site's filters at its first call: one call site per filter
+        if level != "OK" and log_every_s:
+            self.get_logger().warning(f"{level}: {message}", throttle_duration_sec=log_every_s)
+        elif level != "OK":
+            self.get_logger().warning(f"{level}: {message}")
 
     def stop(self):
         with self._lock:
@@ -383,12 +397,24 @@ def run(node_factory, args=None) -> int:
     stop = threading.Event()
     for sig in (signal.SIGINT, signal.SIGTERM):
         signal.signal(sig, lambda *_: stop.set())
-    node = node_factory()
+    try:
+        node = node_factory()
+    except DaddyError as exc:   # a bad parameter (unknown scenario, unreadable plan file, ...)
+        print(f"guidance_node: {exc}", file=sys.stderr)
+        rclpy.try_shutdown()
+        return 2
     executor = MultiThreadedExecutor(num_threads=3)
     executor.add_node(node)
     try:
         while not stop.is_set() and rclpy.ok():
-            executor.spin_once(timeout_sec=0.1)
+            try:
+                executor.spin_once(timeout_sec=0.1)
+            except Exception as exc:  # noqa: BLE001  a failing callback must not end guidance
+                if not rclpy.ok():
+                    break
+                node.get_logger().error(f"callback raised {type(exc).__name__}: {exc}")
+                if hasattr(node, "_diag"):
+                    node._diag("ERROR", f"internal error in a callback: {exc!r}", {}, None)
     finally:
         if hasattr(node, "stop"):
             node.stop()

@@ -64,11 +64,17 @@ class SolverOptions:
         for name in ("tol_ddp", "tol_aul", "tol_newton", "rho_max", "rho_factor", "mu_growth"):
             if getattr(self, name) <= 0:
                 raise DaddyError(f"options.{name} must be > 0")
-        hom = tuple(tuple(map(float, p)) for p in self.homotopy)
+        try:
+            hom = tuple(tuple(map(float, p)) for p in self.homotopy)
+        except (TypeError, ValueError) as exc:
+            raise DaddyError("options.homotopy must be a sequence of (h, delta) number pairs") \
+                from exc
         if not hom or any(len(p) != 2 or not (0 <= p[0] <= 1) or not p[1] > 0 for p in hom):
             raise DaddyError("options.homotopy must be a non-empty sequence of (h in [0, 1], delta > 0)")
         object.__setattr__(self, "homotopy", hom)
-        if self.time_budget_s is not None and not self.time_budget_s > 0:
+        tb = self.time_budget_s
+        if tb is not None and (isinstance(tb, bool) or not isinstance(tb, (int, float))
+                               or not tb > 0):
             raise DaddyError(f"options.time_budget_s must be > 0, got {self.time_budget_s!r}")
 
     @property

@@ -21,9 +21,13 @@ def validate(problem, U0: np.ndarray) -> np.ndarray:
     right shape at it, before any iteration. Returns U0 as a float (N, nu) array."""
     N, nu, nx = problem.N, problem.nu, problem.nx
     try:
-        U0 = np.asarray(U0, dtype=float)
+        raw = np.asarray(U0)
+        if raw.dtype.kind not in "iuf":   # no silent casts of complex, bool, text or objects
+            raise TypeError(f"dtype {raw.dtype}")
+        U0 = raw.astype(float)
     except (TypeError, ValueError) as exc:
-        raise DaddyError("u_guess must be a numeric array of shape (N, nu)") from exc
+        raise DaddyError(f"u_guess must be a real numeric array of shape (N, nu) = ({N}, {nu}):"
+                         f" {exc}") from exc
     if U0.shape != (N, nu):
         raise DaddyError(f"u_guess must have shape (N, nu) = ({N}, {nu}), got {U0.shape}")
     if not np.all(np.isfinite(U0)):
