@@ -37,7 +37,7 @@ from . import conversions as cv
 from daddy_core.errors import DaddyError
 from daddy_core.problems import list_cases, load_case
 
-from .planner import FUTURE_TOLERANCE_S, GuidancePlanner, InputRejected
+from .planner import FUTURE_TOLERANCE_S, TIME_TOLERANCE_S, GuidancePlanner, InputRejected
 
 LATCHED = QoSProfile(depth=1, reliability=ReliabilityPolicy.RELIABLE,
                      durability=DurabilityPolicy.TRANSIENT_LOCAL, history=HistoryPolicy.KEEP_LAST)
@@ -68,6 +68,9 @@ PARAMETERS = {  # name: (default, description)
 }
 PLANS_DIR = Path(__file__).with_name("plans")
 STATE_HISTORY = 64   # accepted estimates kept to serve requests stamped in their past
+# a request stamped after the newest estimate waits this long for the estimate of its time
+# (topics are not ordered with each other: a request can overtake the estimate sent before it)
+ESTIMATE_WAIT_S = 0.5
 
 
 class GuidanceNode(Node):
@@ -88,8 +91,8 @@ class GuidanceNode(Node):
         self._lock = threading.Lock()
         self._wake = threading.Condition(self._lock)
         self._states = deque(maxlen=STATE_HISTORY)   # accepted (pos, vel, stamp), arrival order
-        self._mass = None
-        self._pending = None        # (request_id, request_stamp) awaiting a solve
+        self._masses = deque(maxlen=STATE_HISTORY)   # accepted (stamp, mass kg), arrival order
+        self._pending = None        # (request_id, request_stamp, monotonic arrival) to solve
         self._busy = False
         self._n_started = 0         # solves started / finished (sequential, one worker)
         self._n_finished = 0
@@ -178,6 +181,7 @@ class GuidanceNode(Node):
             return
         with self._lock:
             self._states.append((pos, vel, stamp))
+            self._wake.notify_all()
         plan = self.planner.plan or self._adopt_nominal()
         if plan is not None:
             self.pub_thrust.publish(cv.thrust_command(plan.thrust_at(stamp), stamp, self.frame_id))
@@ -191,14 +195,15 @@ class GuidanceNode(Node):
             self._reject("mass_estimate", str(exc), stamp)
             return
         with self._lock:
-            self._mass = mass
+            self._masses.append((stamp, mass))
+            self._wake.notify_all()
         if self.planner.plan is None:
             self._adopt_nominal()
         self._maybe_replan_after_restart()
 
     def _maybe_replan_after_restart(self):
         with self._lock:
-            go = self._replan_on_first_estimate and self._states and self._mass is not None
+            go = self._replan_on_first_estimate and self._states and self._masses
             if go:
                 self._replan_on_first_estimate = False
         if go:
@@ -232,8 +237,9 @@ class GuidanceNode(Node):
 
     def _state_for(self, request_stamp: float | None):
         """The estimate a request is served from: the newest received (service requests), or the
-        newest stamped at most FUTURE_TOLERANCE_S after the request stamp (topic requests).
-        Raises InputRejected when every stored estimate is in the request's future."""
+        newest stamped at most FUTURE_TOLERANCE_S after the request's mission time (its stamp
+        plus its wait in the queue; topic requests). Raises InputRejected when every stored
+        estimate is in the future of that time."""
         with self._lock:
             states = list(self._states)
         if not states or request_stamp is None:
@@ -249,8 +255,8 @@ class GuidanceNode(Node):
         """Adopt the nominal plan at the first estimate (state and mass both received)."""
         state = self._latest_state()
         with self._lock:
-            mass, plan_file = self._mass, self.plan_file
-        if not plan_file or state is None or mass is None:
+            mass, plan_file = bool(self._masses), self.plan_file
+        if not plan_file or state is None or not mass:
             return None
         stamp = state[2]
         try:
@@ -273,7 +279,7 @@ class GuidanceNode(Node):
         with self._lock:
             if self._pending is not None or self._busy:
                 self.coalesced += 1
-            self._pending = (request_id, stamp_s)
+            self._pending = (request_id, stamp_s, time.monotonic())
             self._wake.notify()
             return self._n_started + 1
 
@@ -298,13 +304,16 @@ class GuidanceNode(Node):
                     self._wake.wait(0.2)
                 if self._stop:
                     return
-                request_id, request_stamp = self._pending
+                request_id, request_stamp, arrived = self._pending
                 self._pending = None
+                self._wait_for_estimate(request_stamp)
+                if request_stamp is not None:
+                    # mission time now: the request stamp plus the time it waited in the queue
+                    request_stamp += time.monotonic() - arrived
                 self._busy = True
                 self._n_started += 1
-                mass = self._mass
             try:
-                self._replan_once(request_id, request_stamp, mass)
+                self._replan_once(request_id, request_stamp)
             except Exception as exc:  # never let the worker die
                 self._finish(request_id, None, "ERROR", f"internal error: {exc!r}", None)
             finally:
@@ -313,7 +322,33 @@ class GuidanceNode(Node):
                     self._n_finished += 1
                     self._wake.notify_all()
 
-    def _replan_once(self, request_id, request_stamp, mass):
+    def _wait_for_estimate(self, request_stamp: float | None) -> None:
+        """(lock held) Wait up to ESTIMATE_WAIT_S for an estimate stamped near the request and
+        for the mass estimate of the newest state's time (topics arrive in any order)."""
+        end = time.monotonic() + ESTIMATE_WAIT_S
+
+        def ready():
+            if not self._states:
+                return False
+            newest = max(s[2] for s in self._states)
+            if request_stamp is not None and newest < request_stamp - FUTURE_TOLERANCE_S:
+                return False
+            return any(m[0] >= newest - TIME_TOLERANCE_S for m in self._masses)
+
+        while not self._stop and time.monotonic() < end and not ready():
+            self._wake.wait(0.02)
+
+    def _mass_for(self, stamp: float) -> float | None:
+        """The mass estimate of the state's time: same stamp, else the newest before it, else
+        the newest received (mass changes slowly; its own checks already passed)."""
+        with self._lock:
+            masses = list(self._masses)
+        if not masses:
+            return None
+        before = [m for m in masses if m[0] <= stamp + TIME_TOLERANCE_S]
+        return max(before)[1] if before else masses[-1][1]
+
+    def _replan_once(self, request_id, request_stamp):
         started = {"solve_start_unix_s": f"{time.time():.6f}"}
         try:
             state = self._state_for(request_stamp)
@@ -321,6 +356,7 @@ class GuidanceNode(Node):
             self._finish(request_id, None, "ERROR", f"input rejected: {exc}", request_stamp, started)
             return
         now = request_stamp if request_stamp is not None else (state[2] if state else None)
+        mass = None if state is None else self._mass_for(state[2])
         if state is None or mass is None:
             self._finish(request_id, None, "ERROR", "no valid state_estimate and mass_estimate yet",
                          now, started)

@@ -510,24 +510,25 @@ def load(sizes: Sizes, workdir: Path) -> list[Row]:
 
         probes, triggers = [], []
 
-        def responsiveness():
+        def probe():
             req = GetParameters.Request(names=["time_budget_s"])
-            k = 0
             while not stop.is_set():
                 resp, lat = client.call(client.get_params, req, 5.0)
                 probes.append((resp is not None, lat))
-                if k % 8 == 0:
-                    resp, lat = client.call(client.trigger, Trigger.Request(), 90.0)
-                    triggers.append((resp is not None and resp.success, lat,
-                                     resp.message if resp else "no answer"))
-                k += 1
                 time.sleep(0.25)
 
-        threads = [threading.Thread(target=estimates, daemon=True),
-                   threading.Thread(target=responsiveness, daemon=True)]
+        def trigger():
+            while not stop.is_set():
+                resp, lat = client.call(client.trigger, Trigger.Request(), 90.0)
+                triggers.append((resp is not None and resp.success, lat,
+                                 resp.message if resp else "no answer"))
+                time.sleep(2.0)
+
+        threads = [threading.Thread(target=f, daemon=True) for f in (estimates, probe, trigger)]
         threads[0].start()
         time.sleep(0.2)
-        threads[1].start()
+        for th in threads[1:]:
+            th.start()
         rss0 = rss_mb(node.pid)
         # burst: sizes.burst requests spread over one second
         t_burst = time.time()
@@ -592,6 +593,12 @@ def load(sizes: Sizes, workdir: Path) -> list[Row]:
         rows[1].check(all(schedule_safe(m, umax) for _, m in schedules), "unsafe schedule")
         for ok, lat in probes:
             rows[2].check(ok and lat < 2.0, f"get_parameters took {lat:.2f} s", lat)
+        times = [float(s[2]["solve_time_s"]) for _, s in solves if "solve_time_s" in s[2]]
+        if times:
+            rows[1].failures.append(f"(info) {len(solves)} solves for {len(requests)} requests, "
+                                    f"solve time median {np.median(times):.2f} s, max "
+                                    f"{max(times):.2f} s; worst Trigger "
+                                    f"{max((t[1] for t in triggers), default=0):.1f} s")
         for ok, lat, msg in triggers:
             rows[2].check(ok, f"Trigger: {msg}", lat)
 
@@ -708,7 +715,7 @@ def solver_faults(sizes: Sizes, workdir: Path) -> list[Row]:
 
 
 # ---------------------------------------------------------------------------- process faults
-def process_faults(sizes: Sizes, workdir: Path) -> list[Row]:
+def process_faults(sizes: Sizes, workdir: Path, progress=None) -> list[Row]:
     """Kill -9 the node mid-transfer and restart it with the same persist_file: it restores the
     persisted plan, re-plans at the first estimate, and the closed-loop demo reaches the target."""
     from .demo import RosLink, fly
@@ -758,7 +765,8 @@ def process_faults(sizes: Sizes, workdir: Path) -> list[Row]:
                 link.publish_estimate(*sim.truth_si(), sim.t_s)
             if not link.wait_connected(0.1):
                 raise RuntimeError("guidance node not connected")
-            r = fly(link, sim, planner, replan_every=5, substeps=2, final_stages=2)
+            r = fly(link, sim, planner, replan_every=5, substeps=2, final_stages=2,
+                    progress=progress)
         finally:
             ex.shutdown(timeout_sec=2.0)
             link.node.destroy_node()
