@@ -253,19 +253,15 @@ def main(argv=None) -> int:
 
 def _ros_demo(args, planner, errors, m_open, m0) -> int:
     import rclpy
-    from rclpy.executors import MultiThreadedExecutor
     from rclpy.signals import SignalHandlerOptions
 
-    from .guidance_node import GuidanceNode
+    from .guidance_node import GuidanceNode, spin_in_thread
     rclpy.init(signal_handler_options=SignalHandlerOptions.NO)
     guidance = GuidanceNode(scenario=args.case, time_budget_s=args.time_budget)
     guidance.adopt_plan(planner.plan)            # the nominal plan, anchored at T0
     link = RosLink(guidance.frame_id, timeout_s=3 * args.time_budget + 30)
-    executor = MultiThreadedExecutor(num_threads=4)
-    executor.add_node(guidance)
-    executor.add_node(link.node)
-    spin = threading.Thread(target=executor.spin, daemon=True)
-    spin.start()
+    # one single-threaded executor per node (rclpy's multi-threaded one busy-polls)
+    executors = [spin_in_thread(guidance), spin_in_thread(link.node)]
     try:
         if not link.wait_connected():
             print("ROS graph did not connect on loopback", flush=True)
@@ -275,7 +271,8 @@ def _ros_demo(args, planner, errors, m_open, m0) -> int:
                 progress=lambda s: print(s, flush=True))
     finally:
         guidance.stop()
-        executor.shutdown(timeout_sec=2.0)
+        for ex in executors:
+            ex.shutdown(timeout_sec=2.0)
         guidance.destroy_node()
         link.node.destroy_node()
         rclpy.try_shutdown()

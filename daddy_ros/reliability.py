@@ -129,13 +129,12 @@ class Client:
         from geometry_msgs.msg import InertiaStamped, Vector3Stamped
         from nav_msgs.msg import Odometry
         from rcl_interfaces.srv import GetParameters, SetParameters
-        from rclpy.executors import MultiThreadedExecutor
         from std_msgs.msg import Header
         from std_srvs.srv import Trigger
         from trajectory_msgs.msg import JointTrajectory
 
         from . import conversions as cv
-        from .guidance_node import LATCHED, RELIABLE
+        from .guidance_node import LATCHED, RELIABLE, spin_in_thread
 
         self.cv, self.Header, self.InertiaStamped = cv, Header, InertiaStamped
         self.node = rclpy.create_node("daddy_reliability_client")
@@ -154,10 +153,7 @@ class Client:
                               RELIABLE)
         n.create_subscription(Vector3Stamped, "thrust_command",
                               lambda m: self._add(self.thrust, m), RELIABLE)
-        self.executor = MultiThreadedExecutor(num_threads=2)
-        self.executor.add_node(n)
-        self.spin = threading.Thread(target=self.executor.spin, daemon=True)
-        self.spin.start()
+        self.executor = spin_in_thread(n)
 
     def _add(self, bucket, msg):
         with self.cond:
@@ -270,7 +266,7 @@ def _start_node(workdir: Path, client: Client, sim, **params) -> NodeProcess:
 
 
 # ---------------------------------------------------------------------------- bad inputs
-def _bad_estimate_strategy(pos, vel, mass, dry, wet):
+def _bad_estimate_strategy(pos, vel, dry, wet):
     """Hypothesis strategy of (kind, payload, expected text in the diagnostic)."""
     from hypothesis import strategies as st
     nonfinite = st.sampled_from([math.nan, math.inf, -math.inf])
@@ -281,8 +277,8 @@ def _bad_estimate_strategy(pos, vel, mass, dry, wet):
         fault = draw(st.sampled_from(["position", "velocity", "frame", "stamp", "near_sun",
                                       "far", "speed", "mass_nonfinite", "mass_low", "mass_high",
                                       "empty"]))
-        p, v, m, stamp, frame = pos.copy(), vel.copy(), mass, T0_S + draw(
-            st.floats(0, 1e6)), FRAME
+        p, v, frame = pos.copy(), vel.copy(), FRAME
+        stamp = T0_S + draw(st.floats(0, 1e6))
         if fault in ("position", "velocity"):
             arr = p if fault == "position" else v
             i = draw(st.lists(st.integers(0, 2), min_size=1, max_size=3, unique=True))
@@ -354,7 +350,7 @@ def bad_inputs(sizes: Sizes, workdir: Path) -> list[Row]:
 
         @settings(max_examples=sizes.bad_inputs, database=None, deadline=None,
                   suppress_health_check=list(HealthCheck))
-        @given(_bad_estimate_strategy(pos, vel, mass, sc.dry_mass_kg, sc.wet_mass_kg))
+        @given(_bad_estimate_strategy(pos, vel, sc.dry_mass_kg, sc.wet_mass_kg))
         def run(case):
             kind, payload, expect = case
             n0 = len(client.diags)
@@ -610,10 +606,9 @@ def load(sizes: Sizes, workdir: Path) -> list[Row]:
 def solver_faults(sizes: Sizes, workdir: Path) -> list[Row]:
     """Non-convergence, a blown time budget, dynamics raising / returning NaN mid-solve: the
     last valid schedule stays published, diagnostics say why, the next request works."""
-    from rclpy.executors import MultiThreadedExecutor
     from rclpy.parameter import Parameter
 
-    from .guidance_node import GuidanceNode
+    from .guidance_node import GuidanceNode, spin_in_thread
 
     planner0, sim, umax = _nominal()
     row = Row("solver faults")
@@ -633,10 +628,7 @@ def solver_faults(sizes: Sizes, workdir: Path) -> list[Row]:
     def session():
         client = Client()
         node = GuidanceNode(scenario=SCENARIO, frame_id=FRAME, time_budget_s=60.0)
-        ex = MultiThreadedExecutor(num_threads=3)
-        ex.add_node(node)
-        th = threading.Thread(target=ex.spin, daemon=True)
-        th.start()
+        ex = spin_in_thread(node)
         try:
             if not client.connected():
                 raise RuntimeError("in-process guidance node not discovered")
@@ -728,13 +720,10 @@ def process_faults(sizes: Sizes, workdir: Path, progress=None) -> list[Row]:
     m_open = float(planner.plan.states_si[-1, 6])
 
     def session():
-        import rclpy
-        from rclpy.executors import MultiThreadedExecutor
+        from .guidance_node import spin_in_thread
         node = NodeProcess(workdir, persist_file=str(persist)).start()
         link = RosLink(FRAME, timeout_s=120.0)
-        ex = MultiThreadedExecutor(num_threads=2)
-        ex.add_node(link.node)
-        threading.Thread(target=ex.spin, daemon=True).start()
+        ex = spin_in_thread(link.node)
         sim = TruthSim(SCENARIO, Errors(0, 0, 0, 0), t0_s=T0_S)
         count = {"replans": 0, "kills": 0}
         kill_at = {2 + 2 * k for k in range(sizes.kills)}
@@ -771,7 +760,6 @@ def process_faults(sizes: Sizes, workdir: Path, progress=None) -> list[Row]:
             ex.shutdown(timeout_sec=2.0)
             link.node.destroy_node()
             node.stop()
-            del rclpy
         ok = (r["miss_km"] <= 1.0 and r["miss_cm_s"] <= 1.0
               and abs(r["final_mass_kg"] - m_open) <= 0.01 * (planner.case.spacecraft.wet_mass_kg
                                                                - m_open))

@@ -293,6 +293,7 @@ def ddp(st: Stages, sweep: str, dyn: bool, opts, stats: DDPStats, deadline: floa
         # converged when the decrease is small for a (nearly) full step: a small decrease after a
         # heavily shortened step only says the line search struggled
         full_step_gain = -(gains.dv1 + gains.dv2) / max(abs(J), 1e-300)
-        if it >= 3 and 0.0 <= rel < opts.tol_ddp and (a >= 0.5 or full_step_gain < opts.tol_ddp):
+        if (it >= opts.ddp_min_iter and 0.0 <= rel < opts.tol_ddp
+                and (a >= 0.5 or full_step_gain < opts.tol_ddp)):
             return DDPResult(st, True, it, "relative cost decrease below tol_ddp")
     return DDPResult(st, False, opts.ddp_max_iter, "ddp_max_iter reached")

@@ -13,7 +13,9 @@ class SolverOptions:
     """Tolerances and algorithm parameters (defaults: the reference code's values).
 
     Attributes:
-        tol_ddp: relative cost decrease that stops a DDP solve (after >= 3 iterations).
+        tol_ddp: relative cost decrease that stops a DDP solve (after >= ddp_min_iter).
+        ddp_min_iter: iterations before the tol_ddp test applies (the reference: 3; a
+            warm start from a converged solution can stop after 1).
         tol_aul: maximum constraint violation that stops the augmented Lagrangian.
         tol_newton: maximum constraint violation targeted by Newton polishing.
         rho_init, rho_min, rho_max, rho_factor: Quu regularisation schedule.
@@ -41,6 +43,7 @@ class SolverOptions:
     ls_shrink: float = 0.5
     ls_max_halvings: int = 20
     ddp_max_iter: int = 200
+    ddp_min_iter: int = 3
     aul_max_iter: int = 40
     newton_max_iter: int = 60
     lambda_max: float = 1e8
