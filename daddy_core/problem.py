@@ -125,6 +125,10 @@ class Problem:
         """Propagate controls U (N, nu) from x0 with the stage map, one stage at a time -> X."""
         X = np.empty((self.N + 1, self.nx))
         X[0] = self.x0 if x0 is None else x0
+        if getattr(self.step, "unbatched_ok", False):   # rk78's faster single-trajectory path
+            for k in range(self.N):
+                X[k + 1] = self.step(X[k], U[k], float(self.stage_dt[k]))
+            return X
         for k in range(self.N):
             X[k + 1] = self.step(X[k][:, None], U[k][:, None], self.stage_dt[k:k + 1])[:, 0]
         return X
@@ -134,7 +138,10 @@ class Problem:
 def flow_step(rhs, integrator: str = "rk78", tol: float = 1e-13, rk4_steps: int = 20):
     """Stage map f(x, u, dt) from a continuous right-hand side and an integrator."""
     if integrator == "rk78":
-        return lambda x, u, dt: rk78(rhs, x, u, 0.0, dt, tol=tol)
+        def step(x, u, dt):
+            return rk78(rhs, x, u, 0.0, dt, tol=tol)
+        step.unbatched_ok = True   # also takes x (nx,), u (nu,), scalar dt
+        return step
     if integrator == "rk4":
         return lambda x, u, dt: rk4(rhs, x, u, 0.0, dt, steps=rk4_steps)
     raise DaddyError(f"integrator must be 'rk78' or 'rk4', got {integrator!r}")

@@ -122,7 +122,9 @@ class GuidancePlanner:
         self.options = case_options(self.case, self.fuel_optimal, time_budget_s=time_budget_s,
                                     **overrides)
         # re-optimisations run the last homotopy step only (the plan is already fuel-optimal)
-        self.replan_options = self.options.with_(homotopy=self.options.homotopy[-1:])
+        # (the warm start is converged already: the tol_ddp test may stop DDP after 1 iteration)
+        self.replan_options = self.options.with_(homotopy=self.options.homotopy[-1:],
+                                                 ddp_min_iter=1)
         self.time_budget_s = time_budget_s
         self.staleness_s = staleness_s
         self.mass_tolerance_kg = mass_tolerance_kg
@@ -325,7 +327,8 @@ class GuidancePlanner:
     def _assess(self, sol: Solution, problem):
         """(safe to fly, meets every constraint, reason, X, terminal miss). Safe: finite and
         within the thrust and mass bounds; feasible: also meets the terminal constraints. X is
-        the float rollout of the (saturated) controls, miss its max |terminal constraint|.
+        the trajectory of the (saturated) controls, miss its max |terminal constraint| (and at
+        least the solver's DOP853 re-propagation miss).
 
         Thrust magnitudes over the bound by at most SATURATION_SLACK (relative; solver
         tolerance) are saturated onto it in place -- the engine cannot do more anyway.
@@ -340,14 +343,22 @@ class GuidancePlanner:
                 return False, False, "solution violates the thrust bound", None, np.inf
             over = mags > umax
             U[over] *= (umax / mags[over])[:, None]
-        X = problem.rollout(U)
+            excess = float(np.max(mags / umax)) - 1.0
+        else:
+            excess = 0.0
+        # the solver's own trajectory, independently re-propagated (DOP853) by solve(), serves
+        # as is; controls changed by the saturation beyond round-off are rolled out again
+        if excess > 1e-9 or sol.repropagation_miss is None:
+            X, repro = problem.rollout(U), 0.0
+        else:
+            X, repro = sol.X, sol.repropagation_miss
         if not np.all(np.isfinite(X)):
             return False, False, "solution propagates to a non-finite state", None, np.inf
         g, ni = problem.path_constraints(X[:-1].T, U.T, problem.stage_dt)
         if g is not None and ni and np.max(g[:ni]) > 1e-6:
             return (False, False, f"solution violates a path constraint by {np.max(g[:ni]):.2e}",
                     None, np.inf)
-        miss = self._miss(problem, X)
+        miss = max(self._miss(problem, X), repro)
         if miss > max(1e-6, 10 * self.options.tol_aul):
             return True, False, f"terminal constraint missed by {miss:.2e} (normalised)", X, miss
         return True, True, "", X, miss
