@@ -480,24 +480,37 @@ def run(node_factory, args=None) -> int:
     return 0
 
 
-def spin_in_thread(node: Node) -> SingleThreadedExecutor:
-    """Spin ``node`` on its own single-threaded executor in a daemon thread (in-process use:
-    demo, tests, tools); ``executor.shutdown()`` ends it."""
-    executor = SingleThreadedExecutor()
-    executor.add_node(node)
-    threading.Thread(target=_spin_quietly, args=(executor,), daemon=True).start()
-    return executor
+class SpinThread:
+    """A node spun by its own single-threaded executor in a daemon thread (in-process use:
+    demo, tests, tools, the service helper). ``shutdown()`` stops and joins the thread before
+    the executor is shut down, so no rclpy call is in flight when nodes are destroyed."""
+
+    def __init__(self, node: Node):
+        self.executor = SingleThreadedExecutor()
+        self.executor.add_node(node)
+        self._stop = threading.Event()
+        self._thread = threading.Thread(target=self._spin, daemon=True,
+                                        name=f"spin_{node.get_name()}")
+        self._thread.start()
+
+    def _spin(self) -> None:
+        while not self._stop.is_set() and rclpy.ok():
+            try:
+                self.executor.spin_once(timeout_sec=0.05)
+            except Exception as exc:  # noqa: BLE001  log, keep serving
+                if self._stop.is_set() or not rclpy.ok():
+                    return
+                rclpy.logging.get_logger("daddy_guidance").error(f"callback raised {exc!r}")
+
+    def shutdown(self, timeout_sec: float = 2.0) -> None:
+        self._stop.set()
+        self._thread.join(timeout_sec)
+        self.executor.shutdown(timeout_sec=timeout_sec)
 
 
-def _spin_quietly(executor) -> None:
-    """Spin until shutdown; exceptions of the helper's callbacks are logged, not fatal."""
-    while rclpy.ok():
-        try:
-            executor.spin_once(timeout_sec=0.1)
-        except Exception as exc:  # noqa: BLE001
-            if not rclpy.ok():
-                return
-            rclpy.logging.get_logger("daddy_guidance").error(f"service callback raised {exc!r}")
+def spin_in_thread(node: Node) -> SpinThread:
+    """Spin ``node`` on its own executor thread; ``.shutdown()`` ends it."""
+    return SpinThread(node)
 
 
 def _guidance_with_service_node() -> GuidanceNode:

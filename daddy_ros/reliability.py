@@ -109,7 +109,8 @@ class NodeProcess:
         self.proc.send_signal(signal.SIGKILL)
         self.proc.wait(10)
 
-    def stop(self):
+    def stop(self) -> int | None:
+        """SIGINT and wait; returns the exit code (0: clean shutdown)."""
         if self.alive():
             self.proc.send_signal(signal.SIGINT)
             try:
@@ -117,6 +118,7 @@ class NodeProcess:
             except subprocess.TimeoutExpired:
                 self.kill()
         self.log.close()
+        return None if self.proc is None else self.proc.returncode
 
 
 class Client:
@@ -479,8 +481,9 @@ def load(sizes: Sizes, workdir: Path) -> list[Row]:
         try:
             _run(client, node)
         finally:
-            node.stop()
+            rc = node.stop()
             client.close()
+        rows[2].check(rc == 0, f"node exit code {rc} after SIGINT (0 expected)")
 
     def _run(client, node):
         wall0 = time.time()
