@@ -79,22 +79,16 @@ def main():
 def end_to_end(trials: int = 5):
     """Trigger -> schedule received by another node, over ROS 2 on loopback (Earth-Mars)."""
     os.environ["ROS_AUTOMATIC_DISCOVERY_RANGE"] = "LOCALHOST"  # the demo stays on loopback
-    import threading
-
     import rclpy
-    from rclpy.executors import MultiThreadedExecutor
 
     from daddy_ros.demo import RosLink
-    from daddy_ros.guidance_node import GuidanceNode
+    from daddy_ros.guidance_node import GuidanceNode, spin_in_thread
     rclpy.init()
     g = GuidanceNode(scenario="earth_mars", frame_id="sun_ecliptic", time_budget_s=600.0)
     planner, _ = nominal_planner("earth_mars", 600.0)
     g.adopt_plan(planner.plan)
     link = RosLink("sun_ecliptic", 600.0)
-    ex = MultiThreadedExecutor(num_threads=4)
-    ex.add_node(g)
-    ex.add_node(link.node)
-    threading.Thread(target=ex.spin, daemon=True).start()
+    spinners = [spin_in_thread(g), spin_in_thread(link.node)]
     link.wait_connected()
     rng = np.random.default_rng(1)
     lat = []
@@ -105,7 +99,8 @@ def end_to_end(trials: int = 5):
         level, dt = link.replan(p, v, m, t, f"e2e-{i}")
         lat.append(dt * 1e3)
     g.stop()
-    ex.shutdown(timeout_sec=2.0)
+    for sp in spinners:
+        sp.shutdown()
     rclpy.try_shutdown()
     print(f"end-to-end trigger -> schedule received (Earth-Mars, ROS 2 loopback): median "
           f"{statistics.median(lat):.0f} ms, max {max(lat):.0f} ms over {trials}")
