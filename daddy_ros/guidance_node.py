@@ -31,12 +31,11 @@ from std_msgs.msg import Header
 from std_srvs.srv import Trigger
 from trajectory_msgs.msg import JointTrajectory
 
+from daddy_core.errors import DaddyError
+from daddy_core.problems import list_cases, load_case
 from daddy_core.solver import METHODS
 
 from . import conversions as cv
-from daddy_core.errors import DaddyError
-from daddy_core.problems import list_cases, load_case
-
 from .planner import FUTURE_TOLERANCE_S, TIME_TOLERANCE_S, GuidancePlanner, InputRejected
 
 LATCHED = QoSProfile(depth=1, reliability=ReliabilityPolicy.RELIABLE,
@@ -103,7 +102,6 @@ class GuidanceNode(Node):
         self._stop = False
         self.replans = 0
         self.coalesced = 0
-        self.rejected = 0           # estimates rejected at arrival
         self.persist_file = g("persist_file")
         self._replan_on_first_estimate = False
 
@@ -118,7 +116,7 @@ class GuidanceNode(Node):
         self.service_node = service_node
         (service_node or self).create_service(Trigger, self.resolve_service_name("~/replan"),
                                               self._on_service,
-                            callback_group=ReentrantCallbackGroup())
+                                              callback_group=ReentrantCallbackGroup())
         self.pub_schedule = self.create_publisher(JointTrajectory, g("schedule_topic"), LATCHED)
         self.pub_path = self.create_publisher(PathMsg, g("path_topic"), LATCHED)
         self.pub_thrust = self.create_publisher(Vector3Stamped, g("thrust_topic"), RELIABLE)
@@ -170,7 +168,6 @@ class GuidanceNode(Node):
     # ------------------------------------------------------------------ inputs
     def _reject(self, topic: str, reason: str, stamp: float) -> None:
         """An input that is not used: ERROR diagnostic naming the field; nothing else changes."""
-        self.rejected += 1
         self._diag("ERROR", f"input rejected: {reason}", {"topic": topic, "stamp_s": f"{stamp:.9f}"},
                    stamp if math.isfinite(stamp) and stamp > 0 else None, log_every_s=1.0)
 
