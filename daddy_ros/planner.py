@@ -30,6 +30,8 @@ FUTURE_TOLERANCE_S = 1.0
 # relative thrust-bound excess (solver tolerance) saturated onto the bound rather than rejected
 SATURATION_SLACK = 1e-3
 PLAN_FORMAT = "daddy-plan-1"
+# augmented-Lagrangian penalty a warm-started re-optimisation starts from (cold: options' 1)
+WARM_MU_INIT = 1e5
 
 
 class InputRejected(DaddyError):
@@ -122,9 +124,12 @@ class GuidancePlanner:
         self.options = case_options(self.case, self.fuel_optimal, time_budget_s=time_budget_s,
                                     **overrides)
         # re-optimisations run the last homotopy step only (the plan is already fuel-optimal)
-        # (the warm start is converged already: the tol_ddp test may stop DDP after 1 iteration)
+        # The warm start is converged already: the tol_ddp test may stop DDP after 1 iteration,
+        # and the penalty resumes high (WARM_MU_INIT) next to the carried-over multipliers -- with
+        # mu = 1 the first DDP pass trades the constraints away (halo: violation 1e-3 -> 1.8)
+        # and the solve needs > 120 s instead of ~36 s.
         self.replan_options = self.options.with_(homotopy=self.options.homotopy[-1:],
-                                                 ddp_min_iter=1)
+                                                 ddp_min_iter=1, mu_init=WARM_MU_INIT)
         self.time_budget_s = time_budget_s
         self.staleness_s = staleness_s
         self.mass_tolerance_kg = mass_tolerance_kg
