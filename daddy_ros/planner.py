@@ -220,10 +220,12 @@ class GuidancePlanner:
             if np.linalg.norm(r + [mu, 0, 0]) < earth_radius:
                 raise InputRejected("state_estimate.pose.pose.position is inside the Earth")
             if np.linalg.norm(r) > 5.0 or np.linalg.norm(x[3:6]) > 10.0:
-                raise InputRejected("state_estimate (position or velocity) is far outside the Earth-Moon domain")
+                raise InputRejected("state_estimate (position or velocity) is far outside the "
+                                    "Earth-Moon domain")
         elif sys == "sun_two_body":
             if not 0.05 < np.linalg.norm(r) < 50.0 or np.linalg.norm(x[3:6]) > 10.0:
-                raise InputRejected("state_estimate (position or velocity) is outside the heliocentric domain")
+                raise InputRejected("state_estimate (position or velocity) is outside the "
+                                    "heliocentric domain")
 
     # ------------------------------------------------------------------ shift (warm start)
     def shifted_problem(self, plan: Plan | None, t_s: float, x0: np.ndarray):

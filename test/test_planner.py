@@ -1,0 +1,95 @@
+"""ROS-free guidance logic: the warm-start shift, estimate checks, plan persistence, and the
+message conversions (message classes only, no graph)."""
+import json
+
+import numpy as np
+import pytest
+
+from daddy_core.errors import DaddyError
+from daddy_ros.demo import PLANS_DIR, T0_S
+from daddy_ros.planner import MIN_STAGE_FRACTION, GuidancePlanner, InputRejected
+
+
+@pytest.fixture(scope="module")
+def planner():
+    pl = GuidancePlanner("earth_mars")
+    pl.load_plan(PLANS_DIR / "earth_mars_fuel.json", T0_S)
+    return pl
+
+
+def test_shift_drops_executed_stages_and_keeps_time_to_go(planner):
+    plan = planner.plan
+    dt = plan.stage_dt_s
+    x0 = planner.plan.solution.X[0]
+    tu = planner.units.tu_s
+    # 2.5 stages flown: two stages dropped, the current (third) one shortened
+    t = plan.epoch_s + dt[0] + dt[1] + 0.5 * dt[2]
+    prob, U, duals = planner.shifted_problem(plan, t, x0)
+    assert prob.N == len(dt) - 2
+    assert prob.stage_dt[0] * tu == pytest.approx(0.5 * dt[2])
+    assert np.sum(prob.stage_dt) * tu == pytest.approx(plan.end_s - t)
+    np.testing.assert_array_equal(U, plan.solution.U[2:])
+    assert duals["lam"].shape[1] == prob.N
+    # a first stage shorter than MIN_STAGE_FRACTION is merged into the next one
+    t = plan.epoch_s + dt[0] - 0.5 * MIN_STAGE_FRACTION * dt[1]
+    prob, U, _ = planner.shifted_problem(plan, t, x0)
+    assert prob.N == len(dt) - 1
+    assert prob.stage_dt[0] * tu == pytest.approx(dt[1] + 0.5 * MIN_STAGE_FRACTION * dt[1])
+    np.testing.assert_array_equal(U, plan.solution.U[1:])   # the merged stage flies stage 1's
+    with pytest.raises(InputRejected, match="ended"):
+        planner.shifted_problem(plan, plan.end_s + 1.0, x0)
+
+
+@pytest.mark.parametrize("pos_scale, vel_nan, mass, stamp, now, field", [
+    (1.0, True, 900.0, T0_S, None, "twist.twist.linear"),
+    (1e-3, False, 900.0, T0_S, None, "heliocentric"),
+    (1.0, False, 400.0, T0_S, None, "inertia.m"),
+    (1.0, False, 2000.0, T0_S, None, "inertia.m"),
+    (1.0, False, 900.0, 0.0, None, "header.stamp"),
+    (1.0, False, 900.0, T0_S + 10.0, T0_S, "future"),
+    (1.0, False, 900.0, T0_S, T0_S + 1e6, "stale"),
+])
+def test_check_state_names_the_field(planner, pos_scale, vel_nan, mass, stamp, now, field):
+    X = planner.plan.states_si
+    vel = X[0, 3:6] * (np.nan if vel_nan else 1.0)
+    with pytest.raises(InputRejected, match=field):
+        planner.check_state(X[0, :3] * pos_scale, vel, mass, stamp, now)
+
+
+def test_persistence_round_trip_and_bad_files(planner, tmp_path):
+    path = tmp_path / "plan.json"
+    planner.save_plan(path)
+    other = GuidancePlanner("earth_mars")
+    plan = other.restore_plan(path)
+    assert plan.epoch_s == planner.plan.epoch_s
+    np.testing.assert_array_equal(plan.thrust_n, planner.plan.thrust_n)
+    np.testing.assert_array_equal(plan.solution.duals["lam"], planner.plan.solution.duals["lam"])
+    data = json.loads(path.read_text())
+    with pytest.raises(DaddyError, match="scenario"):
+        GuidancePlanner("halo_l2_l1").restore_plan(path)
+    data["epoch_s"] = "soon"
+    path.write_text(json.dumps(data))
+    with pytest.raises(DaddyError, match="unreadable"):
+        other.restore_plan(path)
+    path.write_text("{ truncated")
+    with pytest.raises(DaddyError, match="unreadable"):
+        other.restore_plan(path)
+
+
+def test_message_conversions_round_trip(planner):
+    cv = pytest.importorskip("daddy_ros.conversions")
+    plan = planner.plan
+    msg = cv.state_to_odometry(plan.states_si[0, :3], plan.states_si[0, 3:6], 1234.5, "f")
+    pos, vel, stamp, frame = cv.odometry_to_state(msg)
+    np.testing.assert_allclose(pos, plan.states_si[0, :3])
+    np.testing.assert_allclose(vel, plan.states_si[0, 3:6])
+    assert stamp == pytest.approx(1234.5) and frame == "f"
+    # a schedule published mid-plan starts at the stage containing from_s
+    from_s = plan.epoch_s + plan.stage_dt_s[0] * 1.5
+    traj = cv.plan_to_joint_trajectory(plan, "f", from_s)
+    starts, u = cv.joint_trajectory_to_schedule(traj)
+    assert len(u) == len(plan.thrust_n) - 1
+    np.testing.assert_array_equal(u, plan.thrust_n[1:])
+    assert starts[0] == 0.0
+    assert starts[1] == pytest.approx(plan.stage_dt_s[:2].sum() - 1.5 * plan.stage_dt_s[0],
+                                      abs=1e-6)
