@@ -220,7 +220,8 @@ def main(argv=None) -> int:
     ap.add_argument("--case", default="halo_l2_l1", choices=["halo_l2_l1", "earth_mars", "dro_dro"])
     ap.add_argument("--runs", type=int, default=0, help="Monte Carlo runs without the ROS graph")
     ap.add_argument("--seed", type=int, default=1)
-    ap.add_argument("--replan-every", type=int, default=10, help="stages between re-optimisations")
+    ap.add_argument("--replan-every", type=int, default=0,
+                    help="stages between re-optimisations (0: every 5 %% of the stages)")
     ap.add_argument("--substeps", type=int, default=2, help="simulation steps per stage")
     ap.add_argument("--final-stages", type=int, default=2,
                     help="re-optimise at every sub-step of the last stages")
@@ -234,6 +235,7 @@ def main(argv=None) -> int:
           f"{errors.nav_vel_m_s * 1e3} mm/s, execution errors {errors.exec_mag:.0%} / "
           f"{errors.exec_point_deg} deg (1 sigma)", flush=True)
     planner, m_open = nominal_planner(args.case, args.time_budget)
+    args.replan_every = args.replan_every or max(1, planner.base_problem.N // 20)
     m0 = planner.case.spacecraft.wet_mass_kg
     print(f"open-loop optimum: final mass {m_open:.3f} kg", flush=True)
     if args.runs:
