@@ -234,10 +234,6 @@ class GuidanceNode(Node):
             return f"persist_file not written: {exc}"
         return ""
 
-    def _latest_state(self):
-        with self._lock:
-            return self._states[-1] if self._states else None
-
     def _state_for(self, request_stamp: float | None):
         """The estimate a request is served from: the newest received (service requests), or the
         newest stamped at most FUTURE_TOLERANCE_S after the request's mission time (its stamp
@@ -256,7 +252,7 @@ class GuidanceNode(Node):
 
     def _adopt_nominal(self):
         """Adopt the nominal plan at the first estimate (state and mass both received)."""
-        state = self._latest_state()
+        state = self._state_for(None)
         with self._lock:
             mass, plan_file = bool(self._masses), self.plan_file
         if not plan_file or state is None or not mass:
@@ -368,7 +364,7 @@ class GuidanceNode(Node):
         started["state_stamp_s"] = f"{stamp:.9f}"
         try:
             out = self.planner.replan(pos, vel, mass, stamp, request_id,
-                                      now_s=request_stamp if request_stamp is not None else None)
+                                      now_s=request_stamp)
         except InputRejected as exc:
             self._finish(request_id, None, "ERROR", f"input rejected: {exc}", now, started)
             return
@@ -454,16 +450,12 @@ def run(node_factory, args=None) -> int:
     side_executor = None
     if side is not None:
         side_executor = spin_in_thread(side)
+    def report(exc):
+        if hasattr(node, "_diag"):
+            node._diag("ERROR", f"internal error in a callback: {exc!r}", {}, None)
+
     try:
-        while not stop.is_set() and rclpy.ok():
-            try:
-                executor.spin_once(timeout_sec=0.1)
-            except Exception as exc:  # noqa: BLE001  a failing callback must not end guidance
-                if not rclpy.ok():
-                    break
-                node.get_logger().error(f"callback raised {type(exc).__name__}: {exc}")
-                if hasattr(node, "_diag"):
-                    node._diag("ERROR", f"internal error in a callback: {exc!r}", {}, None)
+        spin_guarded(executor, stop, report)
     finally:
         if hasattr(node, "stop"):
             node.stop()
@@ -475,6 +467,22 @@ def run(node_factory, args=None) -> int:
             side.destroy_node()
         rclpy.try_shutdown()
     return 0
+
+
+def spin_guarded(executor, stop: threading.Event, on_error=None) -> None:
+    """spin_once until ``stop`` is set or rclpy shuts down. A callback that raises is logged
+    (and passed to ``on_error``) instead of ending the loop: a failing callback must not end
+    guidance."""
+    while not stop.is_set() and rclpy.ok():
+        try:
+            executor.spin_once(timeout_sec=0.05)
+        except Exception as exc:  # noqa: BLE001
+            if stop.is_set() or not rclpy.ok():
+                return
+            rclpy.logging.get_logger("daddy_guidance").error(
+                f"callback raised {type(exc).__name__}: {exc}")
+            if on_error is not None:
+                on_error(exc)
 
 
 class SpinThread:
@@ -491,13 +499,7 @@ class SpinThread:
         self._thread.start()
 
     def _spin(self) -> None:
-        while not self._stop.is_set() and rclpy.ok():
-            try:
-                self.executor.spin_once(timeout_sec=0.05)
-            except Exception as exc:  # noqa: BLE001  log, keep serving
-                if self._stop.is_set() or not rclpy.ok():
-                    return
-                rclpy.logging.get_logger("daddy_guidance").error(f"callback raised {exc!r}")
+        spin_guarded(self.executor, self._stop)
 
     def shutdown(self, timeout_sec: float = 2.0) -> None:
         self._stop.set()

@@ -388,8 +388,12 @@ class GuidancePlanner:
         if sol.U.shape[0] != self.base_problem.N:
             raise DaddyError(f"plan file {path} has {sol.U.shape[0]} stages, scenario has "
                              f"{self.base_problem.N}")
+        return self._adopt_solution(sol, epoch_s, "nominal")
+
+    def _adopt_solution(self, sol: Solution, epoch_s: float, request_id: str) -> Plan:
+        """Make a stored solution (stages starting at epoch_s) the current plan."""
         plan = Plan(epoch_s, sol.stage_dt * self.units.tu_s, sol.U_newton.copy(),
-                    self.states_to_si(sol.X), sol, "nominal", 0.0, False, sol.max_violation)
+                    self.states_to_si(sol.X), sol, request_id, 0.0, False, sol.max_violation)
         self.set_plan(plan)
         return plan
 
@@ -425,7 +429,4 @@ class GuidancePlanner:
         if np.max(np.linalg.norm(thrust, axis=1)) > \
                 self.case.spacecraft.max_thrust_n * (1 + SATURATION_SLACK):
             raise DaddyError(f"persisted plan {path} violates the thrust bound")
-        plan = Plan(epoch, sol.stage_dt * self.units.tu_s, thrust.copy(), self.states_to_si(sol.X),
-                    sol, str(data.get("request_id", "restored")), 0.0, False, sol.max_violation)
-        self.set_plan(plan)
-        return plan
+        return self._adopt_solution(sol, epoch, str(data.get("request_id", "restored")))
