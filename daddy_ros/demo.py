@@ -150,31 +150,38 @@ class RosLink:
 
 
 def fly(link, sim: TruthSim, planner: GuidancePlanner, replan_every: int, substeps: int,
-        final_stages: int, progress=None) -> dict:
-    """Run the closed loop to the end of the transfer; returns the figures of the run."""
+        final_stages: int, final_substeps: int = 0, progress=None) -> dict:
+    """Run the closed loop to the end of the transfer; returns the figures of the run.
+
+    Each stage is flown in ``substeps`` steps, the last ``final_stages`` in ``final_substeps``
+    (default: substeps) with a re-optimisation at every step: execution errors after the last
+    re-optimisation cannot be corrected, so the final steps must be short.
+    """
     N = planner.base_problem.N
     dt_stage = sim.tof_s / N
-    step = dt_stage / substeps
+    final_substeps = final_substeps or substeps
     latencies, levels, flown = [], [], [sim.truth_si()[0]]
-    n_steps = N * substeps
-    for j in range(n_steps):
-        t = sim.t_s
-        stage = j // substeps
-        pos, vel, mass = sim.estimate_si()
-        periodic = j % (replan_every * substeps) == 0 and j > 0
+    for stage in range(N):
         final = stage >= N - final_stages
-        if periodic or final:
-            level, lat = link.replan(pos, vel, mass, t, f"r{j}")
-            latencies.append(lat)
-            levels.append(level)
-            if progress:
-                progress(f"  t = {(t - sim.t0_s) / 86400:7.3f} d  stage {stage:3d}/{N}  replan "
-                         f"{level:5s} {lat * 1e3:8.1f} ms")
-        elif isinstance(link, RosLink):
-            link.publish_estimate(pos, vel, mass, t)
-        u = link.thrust_at(t, pos, vel, mass)
-        sim.apply(u, step)
-        flown.append(sim.truth_si()[0])
+        n_sub = final_substeps if final else substeps
+        for i in range(n_sub):
+            t = sim.t_s
+            pos, vel, mass = sim.estimate_si()
+            periodic = i == 0 and stage % replan_every == 0 and stage > 0
+            if periodic or final:
+                level, lat = link.replan(pos, vel, mass, t, f"r{stage}.{i}")
+                latencies.append(lat)
+                levels.append(level)
+                if progress:
+                    progress(f"  t = {(t - sim.t0_s) / 86400:7.3f} d  stage {stage:3d}/{N}  "
+                             f"replan {level:5s} {lat * 1e3:8.1f} ms")
+            elif isinstance(link, RosLink):
+                link.publish_estimate(pos, vel, mass, t)
+            u = link.thrust_at(t, pos, vel, mass)
+            # the last step ends exactly at the final time
+            step = (sim.t0_s + (stage + 1) * dt_stage - t) / (n_sub - i)
+            sim.apply(u, step)
+            flown.append(sim.truth_si()[0])
     miss_r, miss_v = sim.miss()
     m_final = sim.truth_si()[2]
     return {"miss_km": miss_r / 1e3, "miss_cm_s": miss_v * 100, "final_mass_kg": m_final,
@@ -225,6 +232,8 @@ def main(argv=None) -> int:
     ap.add_argument("--substeps", type=int, default=2, help="simulation steps per stage")
     ap.add_argument("--final-stages", type=int, default=2,
                     help="re-optimise at every sub-step of the last stages")
+    ap.add_argument("--final-substeps", type=int, default=8,
+                    help="simulation steps (and re-optimisations) per stage in the last stages")
     ap.add_argument("--time-budget", type=float, default=60.0)
     ap.add_argument("--no-errors", action="store_true", help="perfect navigation and execution")
     ap.add_argument("--plot", default="out/gnc_demo.png", help="PNG of flown vs planned")
@@ -244,7 +253,8 @@ def main(argv=None) -> int:
             seed = args.seed + i
             pl, _ = nominal_planner(args.case, args.time_budget)
             sim = TruthSim(args.case, errors, seed=seed, t0_s=T0_S)
-            r = fly(DirectLink(pl), sim, pl, args.replan_every, args.substeps, args.final_stages)
+            r = fly(DirectLink(pl), sim, pl, args.replan_every, args.substeps, args.final_stages,
+                    args.final_substeps)
             runs.append(r)
             print(f"run {i + 1:3d} seed {seed}: miss {r['miss_km']:.3f} km {r['miss_cm_s']:.2f} cm/s"
                   f", final mass {r['final_mass_kg']:.3f} kg, {r['replans']} replans", flush=True)
@@ -270,7 +280,7 @@ def _ros_demo(args, planner, errors, m_open, m0) -> int:
             return 1
         sim = TruthSim(args.case, errors, seed=args.seed, t0_s=T0_S)
         r = fly(link, sim, guidance.planner, args.replan_every, args.substeps, args.final_stages,
-                progress=lambda s: print(s, flush=True))
+                args.final_substeps, progress=lambda s: print(s, flush=True))
     finally:
         guidance.stop()
         for ex in executors:

@@ -18,7 +18,8 @@ class AULResult:
     converged: bool
     iterations: int
     reason: str
-    alpha: float = 1.0
+    rho: float = 0.0
+    gains: object = None  # Gains of the last backward sweep (None if no DDP iteration ran)
 
 
 def update_multipliers(mult: Multipliers, g, gt, opts) -> Multipliers:
@@ -38,14 +39,22 @@ def update_multipliers(mult: Multipliers, g, gt, opts) -> Multipliers:
 
 
 def aul(problem, X, U, mult: Multipliers, hom, sweep: str, dyn: bool, opts, stats: DDPStats,
-        deadline: float | None = None, progress=None) -> AULResult:
+        deadline: float | None = None, progress=None, rho0: float | None = None,
+        F=None) -> AULResult:
     """Alg. 4: DDP on the augmented cost, multiplier and penalty updates, until the maximum
-    constraint violation is below tol_aul."""
-    st = Stages(problem, X, U, mult, hom, opts.eps_da)
+    constraint violation is below tol_aul. rho0: Quu regularisation to start from (None:
+    opts.rho_init); with opts.carry_rho each DDP solve resumes from the previous one's.
+    F: the stage maps already expanded at (X, U), if any."""
+    st = Stages(problem, X, U, mult, hom, opts.eps_da, F=F)
+    gains = None
     reason = "aul_max_iter reached"
     gmax = np.inf
+    rho, rho_last = rho0, opts.rho_init if rho0 is None else rho0
     for it in range(1, opts.aul_max_iter + 1):
-        res = ddp(st, sweep, dyn, opts, stats, deadline)
+        res = ddp(st, sweep, dyn, opts, stats, deadline, rho0=rho)
+        rho_last = res.rho
+        gains = res.gains or gains
+        rho = res.rho if opts.carry_rho else rho0
         st = res.stages
         g, ni, gt, nti = constraint_values(problem, st.X, st.U)
         gmax = max(max_violation(g, ni), max_violation(gt, nti))
@@ -53,9 +62,9 @@ def aul(problem, X, U, mult: Multipliers, hom, sweep: str, dyn: bool, opts, stat
             progress(f"  AUL {it:2d}: DDP {res.iterations:3d} it ({res.reason}), "
                      f"cost {st.cost:.6e}, max violation {gmax:.2e}")
         if deadline is not None and time.perf_counter() > deadline:
-            return AULResult(st, mult, gmax, False, it, "time budget exceeded")
+            return AULResult(st, mult, gmax, False, it, "time budget exceeded", rho_last, gains)
         if gmax <= opts.tol_aul:
-            return AULResult(st, mult, gmax, True, it, "max violation below tol_aul")
+            return AULResult(st, mult, gmax, True, it, "max violation below tol_aul", rho_last, gains)
         mult = update_multipliers(mult, g, gt, opts)
         st = Stages(problem, st.X, st.U, mult, hom, opts.eps_da, F=st.F)
-    return AULResult(st, mult, gmax, False, opts.aul_max_iter, reason)
+    return AULResult(st, mult, gmax, False, opts.aul_max_iter, reason, rho_last, gains)

@@ -212,6 +212,8 @@ class DDPResult:
     converged: bool
     iterations: int
     reason: str
+    rho: float = 0.0
+    gains: Gains | None = None  # of the last backward sweep
 
 
 _LS_BATCH = 2  # line-search step lengths propagated together
@@ -227,28 +229,32 @@ def _lower_rho(rho: float, opts) -> float:
 
 
 def ddp(st: Stages, sweep: str, dyn: bool, opts, stats: DDPStats, deadline: float | None = None,
-        alpha0: float = 1.0) -> DDPResult:
+        alpha0: float = 1.0, rho0: float | None = None) -> DDPResult:
     """Alg. 3: iterate backward sweep + forward pass until the relative cost decrease is small.
 
     The line search accepts a step when actual / expected decrease lies in
     (ls_min_ratio, ls_max_ratio), halving alpha otherwise; in the Dyn variant alpha carries over
     between iterations (doubled after an accepted step, capped at 1), as in the reference code.
+    rho0: the Quu regularisation to start from (default opts.rho_init); see
+    ``SolverOptions.short_step`` for the optional damping of shortened steps.
     """
     p = st.problem
-    rho = opts.rho_init
+    rho = opts.rho_init if rho0 is None else rho0
     alpha = alpha0
     J = st.cost
+    last = None
     for it in range(1, opts.ddp_max_iter + 1):
         if deadline is not None and time.perf_counter() > deadline:
-            return DDPResult(st, False, it - 1, "time budget exceeded")
+            return DDPResult(st, False, it - 1, "time budget exceeded", rho, last)
         t0 = time.perf_counter()
         gains = backward_sweep(st, sweep, rho)
         stats.backward_s += time.perf_counter() - t0
         if gains is None:
             rho = _raise_rho(rho, opts)
             if rho > opts.rho_max:
-                return DDPResult(st, False, it, "Q_uu not positive definite up to rho_max")
+                return DDPResult(st, False, it, "Q_uu not positive definite up to rho_max", rho, last)
             continue
+        last = gains
         accepted = False
         a0 = alpha if dyn else 1.0
         t0 = time.perf_counter()
@@ -273,9 +279,10 @@ def ddp(st: Stages, sweep: str, dyn: bool, opts, stats: DDPStats, deadline: floa
                     break
         stats.forward_s += time.perf_counter() - t0
         if not accepted:
-            rho = _raise_rho(rho, opts)
+            rho = (max(rho * opts.short_step_rho_growth, opts.rho_min) if opts.short_step
+                   else _raise_rho(rho, opts))
             if rho > opts.rho_max:
-                return DDPResult(st, False, it, "line search failed up to rho_max")
+                return DDPResult(st, False, it, "line search failed up to rho_max", rho, last)
             continue
         stats.iterations += 1
         stats.stages_total += p.N
@@ -287,7 +294,13 @@ def ddp(st: Stages, sweep: str, dyn: bool, opts, stats: DDPStats, deadline: floa
         rel = (J - Jn) / max(abs(J), 1e-300)
         J = st.cost
         stats.history.append({"cost": J, "alpha": a, "rho": rho, "poly": int(poly.sum())})
-        rho = _lower_rho(rho, opts)
+        if a < opts.short_step:
+            # the quadratic model promised far more than the step delivered (e.g. controls in the
+            # linear part of the pseudo-Huber cost, whose tiny curvature asks for huge steps):
+            # damp it, Levenberg-Marquardt-like, rather than crawl on with tiny alphas
+            rho = max(rho * opts.short_step_rho_growth, opts.rho_min)
+        else:
+            rho = _lower_rho(rho, opts)
         if dyn:
             alpha = min(1.0, 2.0 * a)
         # converged when the decrease is small for a (nearly) full step: a small decrease after a
@@ -295,5 +308,5 @@ def ddp(st: Stages, sweep: str, dyn: bool, opts, stats: DDPStats, deadline: floa
         full_step_gain = -(gains.dv1 + gains.dv2) / max(abs(J), 1e-300)
         if (it >= opts.ddp_min_iter and 0.0 <= rel < opts.tol_ddp
                 and (a >= 0.5 or full_step_gain < opts.tol_ddp)):
-            return DDPResult(st, True, it, "relative cost decrease below tol_ddp")
-    return DDPResult(st, False, opts.ddp_max_iter, "ddp_max_iter reached")
+            return DDPResult(st, True, it, "relative cost decrease below tol_ddp", rho, last)
+    return DDPResult(st, False, opts.ddp_max_iter, "ddp_max_iter reached", rho, last)

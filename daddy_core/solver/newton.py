@@ -33,16 +33,18 @@ class PolishResult:
     improved: bool
     iterations: int
     reason: str
+    F: object = None  # stage maps expanded at (X, U) (a DA (nx, N)), or None
 
 
 class _Model:
-    """Order-2 expansion of the active constraints at one Y."""
+    """Order-2 expansion of the active constraints at one Y (F: the stage maps at (X, U) when
+    the caller has them already)."""
 
-    def __init__(self, problem, X, U, active_tol):
+    def __init__(self, problem, X, U, active_tol, F=None):
         p = self.p = problem
         self.X, self.U = X, U
         nx, _nu, N = p.nx, p.nu, p.N
-        self.F = expand_dynamics(p, X[:-1], U, p.stage_dt)            # (nx, N)
+        self.F = F if F is not None else expand_dynamics(p, X[:-1], U, p.stage_dt)  # (nx, N)
         z = da.variables(np.concatenate([X[:-1].T, U.T]), order=2)
         g, ni = p.path_constraints(z[:nx], z[nx:], p.stage_dt)
         self.G = g
@@ -167,8 +169,11 @@ class _BandedSigma:
         return -(self.D.T @ cho_solve_banded((self.cb, False), d))
 
 
-def polish(problem, X, U, opts, deadline: float | None = None) -> PolishResult:
-    """Alg. 11 from (X, U) to max active-constraint violation <= opts.tol_newton."""
+def polish(problem, X, U, opts, deadline: float | None = None, F=None) -> PolishResult:
+    """Alg. 11 from (X, U) to max active-constraint violation <= opts.tol_newton.
+
+    F: the stage maps already expanded at (X, U) (saves one batched expansion). The result
+    carries the maps at the returned (X, U)."""
     X0, U0 = X.copy(), U.copy()
     gamma = 0.5
     it = 0
@@ -178,14 +183,15 @@ def polish(problem, X, U, opts, deadline: float | None = None) -> PolishResult:
         if deadline is not None and time.perf_counter() > deadline:
             reason = "time budget exceeded"
             break
-        model = _Model(problem, X, U, opts.newton_active_tol)
+        model = _Model(problem, X, U, opts.newton_active_tol, F)
+        F = None
         d = model.residual()
         dmax = float(np.max(np.abs(d))) if d.size else 0.0
         if not np.isfinite(dmax):
             reason = "constraint evaluation produced NaN"
             break
         if best is None or dmax < best[0]:
-            best = (dmax, X.copy(), U.copy())
+            best = (dmax, X.copy(), U.copy(), model.F)
         if dmax <= opts.tol_newton:
             reason = "active constraints below tol_newton"
             break
@@ -226,7 +232,7 @@ def polish(problem, X, U, opts, deadline: float | None = None) -> PolishResult:
         X, U = model.apply(dY)
     if best is None:
         return PolishResult(X0, U0, np.inf, False, False, it, reason)
-    dbest, Xb, Ub = best
+    dbest, Xb, Ub, Fb = best
     # report the violation of all constraints (inactive inequalities included)
     viol = max(dbest, total_violation(problem, Xb, Ub))
-    return PolishResult(Xb, Ub, viol, viol <= opts.tol_newton, True, it, reason)
+    return PolishResult(Xb, Ub, viol, viol <= opts.tol_newton, True, it, reason, Fb)

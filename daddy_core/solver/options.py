@@ -21,6 +21,19 @@ class SolverOptions:
         rho_init, rho_min, rho_max, rho_factor: Quu regularisation schedule.
         ls_min_ratio, ls_max_ratio, ls_shrink, ls_max_halvings: backtracking line search; a step
             is accepted when actual / expected decrease is in (min, max).
+        short_step, short_step_rho_growth: when an accepted step was shortened below
+            ``short_step`` (or the line search failed), multiply rho by ``short_step_rho_growth``
+            (Levenberg-Marquardt-like damping of a model that promises too much, e.g. controls in
+            the linear part of the pseudo-Huber cost). 0 (default): the reference's schedule
+            (rho grows by rho_factor only when the line search fails). Used for warm re-solves:
+            from a cold guess the damped steps stop DDP early on the relative-decrease test.
+        carry_rho: each DDP solve of an AUL loop resumes from the previous one's rho instead
+            of rho_init (each homotopy step restarts from rho_init or the warm start's rho:
+            carrying it across the halo's homotopy steps ended in a worse local optimum,
+            958.96 kg instead of 973.51 kg).
+        restore_warm_start: before DDP, drive the initial guess to feasibility with the Newton
+            polishing (Alg. 11); if DDP does not converge (e.g. the time budget), the solve
+            returns that feasible iterate (converged=False, with the reason).
         ddp_max_iter, aul_max_iter, newton_max_iter: iteration bounds.
         lambda_max, mu_init, mu_max, mu_growth: multiplier bound and penalty schedule.
         newton_cv_ratio: the polishing's convergence-rate threshold (eps_CV, paper Alg. 5).
@@ -42,6 +55,10 @@ class SolverOptions:
     ls_max_ratio: float = 10.0
     ls_shrink: float = 0.5
     ls_max_halvings: int = 20
+    short_step: float = 0.0
+    short_step_rho_growth: float = 10.0
+    carry_rho: bool = False
+    restore_warm_start: bool = False
     ddp_max_iter: int = 200
     ddp_min_iter: int = 3
     aul_max_iter: int = 40
@@ -60,7 +77,7 @@ class SolverOptions:
     def __post_init__(self):
         for f in fields(self):
             v = getattr(self, f.name)
-            if f.name in ("homotopy", "verbose", "time_budget_s"):
+            if f.name in ("homotopy", "verbose", "time_budget_s", "carry_rho", "restore_warm_start"):
                 continue
             if not isinstance(v, (int, float)) or v != v or v < 0:
                 raise DaddyError(f"options.{f.name} must be a non-negative number, got {v!r}")
@@ -107,6 +124,8 @@ def case_options(case, fuel_optimal: bool, **overrides) -> SolverOptions:
     pairs = tuple(zip(hom["h"], hom["delta"])) if fuel_optimal else ((0.0, hom["delta"][0]),)
     kw = dict(tol_ddp=s.get("tol_ddp", 1e-4), tol_aul=s.get("tol_aul", 1e-6),
               tol_newton=s.get("tol_newton", 1e-10), rho_max=s.get("rho_max", 1e8), homotopy=pairs)
+    # our additions to the reference's settings, per case (halo: damping of shortened DDP steps)
+    kw.update({k: s[k] for k in ("short_step", "carry_rho") if k in s})
     kw.update(overrides)
     return SolverOptions(**kw)
 

@@ -50,6 +50,7 @@ class Solution:
     units: dict = field(default_factory=dict)
     polynomial_share: float = 0.0
     duals: dict = field(default_factory=dict)  # {"lam": (n_c, N), "lam_t": (n_t,)} as lists
+    rho: float = 0.0  # Quu regularisation at the end of the last DDP solve (warm starts resume it)
 
     _ARRAYS = ("X", "U", "stage_dt", "gains_a", "gains_b")
 

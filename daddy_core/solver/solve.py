@@ -9,8 +9,8 @@ from scipy.integrate import solve_ivp
 
 from ..errors import DaddyError
 from .aul import aul
-from .ddp import DDPStats, backward_sweep
-from .expansion import Multipliers, Stages, total_violation
+from .ddp import DDPStats
+from .expansion import Multipliers, total_violation
 from .newton import polish as newton_polish
 from .options import SolverOptions, parse_method
 from .solution import Solution
@@ -89,7 +89,7 @@ def objective(problem, X, U, hom) -> float:
 
 def solve(problem, u_guess=None, method: str = "dyn", fuel_optimal: bool | None = None,
           polish: bool = True, options: SolverOptions | None = None, case_name: str | None = None,
-          progress=None, duals: dict | None = None) -> Solution:
+          progress=None, duals: dict | None = None, rho: float | None = None) -> Solution:
     """Solve ``problem`` with DADDy.
 
     Args:
@@ -103,6 +103,8 @@ def solve(problem, u_guess=None, method: str = "dyn", fuel_optimal: bool | None 
         progress: callable receiving progress lines (or None).
         duals: warm-start multipliers {"lam": (n_c, N), "lam_t": (n_t,)} (default: those of a
             Solution given as ``u_guess``, when their shapes fit).
+        rho: warm-start Quu regularisation (default: that of a Solution given as ``u_guess``
+            when ``options.carry_rho``, else ``options.rho_init``).
     Returns:
         a ``Solution``. A solve that fails returns ``converged=False`` with the reason and the
         best feasible-so-far iterate (never NaN).
@@ -111,6 +113,8 @@ def solve(problem, u_guess=None, method: str = "dyn", fuel_optimal: bool | None 
     sweep, dyn = parse_method(method)
     if isinstance(u_guess, Solution):
         duals = duals if duals is not None else u_guess.duals
+        if rho is None and opts.carry_rho:
+            rho = u_guess.rho
         u_guess = u_guess.U
     if u_guess is None:
         u_guess = np.full((problem.N, problem.nu), 1e-6)
@@ -127,12 +131,25 @@ def solve(problem, u_guess=None, method: str = "dyn", fuel_optimal: bool | None 
     if not np.all(np.isfinite(X)):
         raise DaddyError("the initial guess propagates to a non-finite state")
     U = U0
+    restored, restore_iters, F = None, 0, None  # F: exact stage maps at (X, U), if any
+    if opts.restore_warm_start:
+        # a feasible iterate first (Newton, Alg. 11), so that a solve stopped by its time budget
+        # still returns a trajectory that meets every constraint
+        pres = newton_polish(problem, X, U, opts, deadline)
+        restore_iters = pres.iterations
+        if pres.converged:
+            X, U, F = pres.X, pres.U, pres.F
+            restored = (X, U)
+        if progress:
+            progress(f"warm start restored by Newton: {pres.iterations} iterations, max violation"
+                     f" {pres.max_violation:.2e} ({pres.reason})")
     best = (X, U)
     aul_iters = 0
     history = []
     converged = True
     reason = "converged"
-    st = None
+    st = gains = None
+    rho_last = opts.rho_init if rho is None else rho
     mult = Multipliers.initial(problem, opts.mu_init)
     if duals:
         lam, lam_t = np.asarray(duals.get("lam", []), float), np.asarray(duals.get("lam_t", []), float)
@@ -146,7 +163,11 @@ def solve(problem, u_guess=None, method: str = "dyn", fuel_optimal: bool | None 
         # each homotopy step is warm-started: controls and duals carry over, penalties restart
         mult.mu[...] = opts.mu_init
         mult.mu_t[...] = opts.mu_init
-        res = aul(problem, X, U, mult, hom, sweep, dyn, opts, stats, deadline, progress)
+        res = aul(problem, X, U, mult, hom, sweep, dyn, opts, stats, deadline, progress,
+                  rho0=rho, F=F)
+        F = None  # the next homotopy step expands its own maps
+        gains = res.gains or gains
+        rho_last = res.rho
         aul_iters += res.iterations
         st = res.stages
         mult = res.mult
@@ -162,12 +183,18 @@ def solve(problem, u_guess=None, method: str = "dyn", fuel_optimal: bool | None 
                 break
     t_ddp = time.perf_counter() - t_start
     X, U = best
-    newton_iters, t_newton = 0, 0.0
-    if polish:
+    fallback = restored is not None and not converged
+    if fallback:  # DDP did not finish: return the feasible, Newton-restored warm start
+        X, U = restored
+        reason += "; returned the Newton-restored warm start"
+    newton_iters, t_newton = restore_iters, 0.0
+    if polish and not fallback:
         t0 = time.perf_counter()
+        # fresh expansions: the Dyn pass's re-centred maps are polynomial approximations, too
+        # loose for 1e-10 feasibility
         pres = newton_polish(problem, X, U, opts, deadline)
         t_newton = time.perf_counter() - t0
-        newton_iters = pres.iterations
+        newton_iters += pres.iterations
         if progress:
             progress(f"newton: {pres.iterations} iterations, max violation {pres.max_violation:.2e}"
                      f" ({pres.reason})")
@@ -180,8 +207,6 @@ def solve(problem, u_guess=None, method: str = "dyn", fuel_optimal: bool | None 
     if not polish and gmax > opts.tol_aul:
         converged = False
     hom_last = hom_seq[-1]
-    gains = backward_sweep(Stages(problem, X, U, Multipliers.initial(problem, opts.mu_init),
-                                  hom_last, opts.eps_da), sweep, max(opts.rho_min, 1e-8)) if st else None
     units = problem.units
     m_idx = problem.mass_index
     final_mass = float(X[-1, m_idx] * units.mu_kg) if m_idx is not None else None
@@ -204,5 +229,6 @@ def solve(problem, u_guess=None, method: str = "dyn", fuel_optimal: bool | None 
                "mu_kg": units.mu_kg, "thrust_unit_n": units.thrust_unit_n},
         polynomial_share=stats.polynomial_share,
         duals={"lam": mult.lam.tolist(), "lam_t": mult.lam_t.tolist()},
+        rho=float(rho_last),
     )
     return sol
