@@ -45,6 +45,10 @@ class DirectLink:
         plan = self.planner.plan
         return plan.thrust_at(t_s) if plan else np.zeros(3)
 
+    def stage_starts(self) -> np.ndarray:
+        plan = self.planner.plan
+        return plan.epoch_s + plan.stage_start_s if plan else np.zeros(0)
+
 
 def _level(level) -> int:
     """DiagnosticStatus.level is a byte in rclpy: as an int."""
@@ -148,40 +152,64 @@ class RosLink:
         k = int(np.searchsorted(starts, rel + 1e-6, side="right")) - 1
         return u[k].copy() if 0 <= k < len(u) else np.zeros(3)
 
+    def stage_starts(self) -> np.ndarray:
+        with self.cond:
+            sched = self.schedule
+        return np.zeros(0) if sched is None else sched[0] + np.asarray(sched[1])
+
+
+def flight_steps(t0_s: float, N: int, dt_stage: float, substeps: int, replan_every: int,
+                 final_stages: int, final_substeps: int, final_min_step: float):
+    """The closed loop's time grid: (start s, end s, re-optimise at the start?) per step.
+
+    Stages are flown in ``substeps`` steps with a re-optimisation every ``replan_every`` stages;
+    the last ``final_stages`` in steps of a stage / ``final_substeps``, each preceded by a
+    re-optimisation, and the remaining time is halved from there on down to
+    ``final_min_step`` (a fraction of a stage): execution errors after the last
+    re-optimisation cannot be corrected, so the last open-loop interval must be short.
+    """
+    for stage in range(N - final_stages):
+        for i in range(substeps):
+            yield (t0_s + (stage + i / substeps) * dt_stage,
+                   t0_s + (stage + (i + 1) / substeps) * dt_stage,
+                   i == 0 and stage > 0 and stage % replan_every == 0)
+    t, t_end = t0_s + (N - final_stages) * dt_stage, t0_s + N * dt_stage
+    fine, shortest = dt_stage / final_substeps, final_min_step * dt_stage
+    while t_end - t > shortest * (1 + 1e-9):
+        rem = t_end - t
+        step = fine if rem > 2 * fine * (1 + 1e-9) else rem / 2
+        yield t, t + step, True
+        t += step
+    yield t, t_end, False
+
 
 def fly(link, sim: TruthSim, planner: GuidancePlanner, replan_every: int, substeps: int,
-        final_stages: int, final_substeps: int = 0, progress=None) -> dict:
-    """Run the closed loop to the end of the transfer; returns the figures of the run.
-
-    Each stage is flown in ``substeps`` steps, the last ``final_stages`` in ``final_substeps``
-    (default: substeps) with a re-optimisation at every step: execution errors after the last
-    re-optimisation cannot be corrected, so the final steps must be short.
-    """
+        final_stages: int, final_substeps: int = 0, final_min_step: float = 1 / 64,
+        progress=None) -> dict:
+    """Run the closed loop to the end of the transfer (time grid: ``flight_steps``); the
+    schedule is flown piecewise constant between its stage starts. Returns the run's figures."""
     N = planner.base_problem.N
     dt_stage = sim.tof_s / N
-    final_substeps = final_substeps or substeps
     latencies, levels, flown = [], [], [sim.truth_si()[0]]
-    for stage in range(N):
-        final = stage >= N - final_stages
-        n_sub = final_substeps if final else substeps
-        for i in range(n_sub):
-            t = sim.t_s
-            pos, vel, mass = sim.estimate_si()
-            periodic = i == 0 and stage % replan_every == 0 and stage > 0
-            if periodic or final:
-                level, lat = link.replan(pos, vel, mass, t, f"r{stage}.{i}")
-                latencies.append(lat)
-                levels.append(level)
-                if progress:
-                    progress(f"  t = {(t - sim.t0_s) / 86400:7.3f} d  stage {stage:3d}/{N}  "
-                             f"replan {level:5s} {lat * 1e3:8.1f} ms")
-            elif isinstance(link, RosLink):
-                link.publish_estimate(pos, vel, mass, t)
-            u = link.thrust_at(t, pos, vel, mass)
-            # the last step ends exactly at the final time
-            step = (sim.t0_s + (stage + 1) * dt_stage - t) / (n_sub - i)
-            sim.apply(u, step)
-            flown.append(sim.truth_si()[0])
+    for j, (t0, t1, replan) in enumerate(flight_steps(
+            sim.t_s, N, dt_stage, substeps, replan_every, final_stages,
+            final_substeps or substeps, final_min_step)):
+        pos, vel, mass = sim.estimate_si()
+        if replan:
+            level, lat = link.replan(pos, vel, mass, t0, f"r{j}")
+            latencies.append(lat)
+            levels.append(level)
+            if progress:
+                progress(f"  t = {(t0 - sim.t0_s) / 86400:7.3f} d  stage "
+                         f"{int((t0 - sim.t0_s) / dt_stage + 1e-9):3d}/{N}  replan {level:5s} "
+                         f"{lat * 1e3:8.1f} ms")
+        elif isinstance(link, RosLink):
+            link.publish_estimate(pos, vel, mass, t0)
+        starts = link.stage_starts()
+        cuts = [t0, *starts[(starts > t0 + 1e-6) & (starts < t1 - 1e-6)], t1]
+        for a, b in zip(cuts[:-1], cuts[1:]):
+            sim.apply(link.thrust_at(a, pos, vel, mass), b - a)
+        flown.append(sim.truth_si()[0])
     miss_r, miss_v = sim.miss()
     m_final = sim.truth_si()[2]
     return {"miss_km": miss_r / 1e3, "miss_cm_s": miss_v * 100, "final_mass_kg": m_final,
@@ -234,6 +262,9 @@ def main(argv=None) -> int:
                     help="re-optimise at every sub-step of the last stages")
     ap.add_argument("--final-substeps", type=int, default=8,
                     help="simulation steps (and re-optimisations) per stage in the last stages")
+    ap.add_argument("--final-min-step", type=float, default=1 / 64,
+                    help="shortest final step (fraction of a stage): the remaining time is "
+                         "halved at each re-optimisation down to it")
     ap.add_argument("--time-budget", type=float, default=60.0)
     ap.add_argument("--no-errors", action="store_true", help="perfect navigation and execution")
     ap.add_argument("--plot", default="out/gnc_demo.png", help="PNG of flown vs planned")
@@ -254,7 +285,7 @@ def main(argv=None) -> int:
             pl, _ = nominal_planner(args.case, args.time_budget)
             sim = TruthSim(args.case, errors, seed=seed, t0_s=T0_S)
             r = fly(DirectLink(pl), sim, pl, args.replan_every, args.substeps, args.final_stages,
-                    args.final_substeps)
+                    args.final_substeps, args.final_min_step)
             runs.append(r)
             print(f"run {i + 1:3d} seed {seed}: miss {r['miss_km']:.3f} km {r['miss_cm_s']:.2f} cm/s"
                   f", final mass {r['final_mass_kg']:.3f} kg, {r['replans']} replans", flush=True)
@@ -280,7 +311,8 @@ def _ros_demo(args, planner, errors, m_open, m0) -> int:
             return 1
         sim = TruthSim(args.case, errors, seed=args.seed, t0_s=T0_S)
         r = fly(link, sim, guidance.planner, args.replan_every, args.substeps, args.final_stages,
-                args.final_substeps, progress=lambda s: print(s, flush=True))
+                args.final_substeps, args.final_min_step,
+                progress=lambda s: print(s, flush=True))
     finally:
         guidance.stop()
         for ex in executors:

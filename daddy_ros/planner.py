@@ -23,6 +23,7 @@ from daddy_core.solver import Solution, case_options, solve
 
 # a first remaining stage shorter than this fraction of a nominal stage is merged into the next
 MIN_STAGE_FRACTION = 0.25
+MIN_STAGES_LEFT = 4  # a re-plan keeps at least this many stages to the end (re-gridded)
 # clock comparisons: times closer than this to a stage boundary count as on it [s]
 TIME_TOLERANCE_S = 1e-6
 # an estimate stamped up to this much after the request time is still usable [s]
@@ -238,7 +239,8 @@ class GuidancePlanner:
 
         Drops the stages already executed, keeps the remaining time to go (the first remaining
         stage is shortened to end on the plan's stage boundary, or merged into the next when
-        shorter than MIN_STAGE_FRACTION of a stage). Without a plan, the full scenario from x0.
+        shorter than MIN_STAGE_FRACTION of a stage; fewer than MIN_STAGES_LEFT stages are
+        re-gridded into that many). Without a plan, the full scenario from x0.
         Returns (problem, U_guess (K, 3) normalised or None, duals for those stages or None).
         """
         base = self.base_problem
@@ -262,6 +264,16 @@ class GuidancePlanner:
             lam = None if lam is None else lam[:, 1:]
         else:
             dts[0] = first
+        if len(dts) < MIN_STAGES_LEFT:
+            # near the end, keep enough controls for the terminal constraints (6 of them, 3 per
+            # stage): re-grid the time to go into MIN_STAGES_LEFT equal stages, warm-started
+            # from the plan's stage at each new stage's midpoint
+            total = float(np.sum(dts))
+            mids = (np.arange(MIN_STAGES_LEFT) + 0.5) * total / MIN_STAGES_LEFT
+            idx = np.minimum(np.searchsorted(np.cumsum(dts), mids), len(dts) - 1)
+            dts = np.full(MIN_STAGES_LEFT, total / MIN_STAGES_LEFT)
+            U = U[idx]
+            lam = None if lam is None else lam[:, idx]
         duals = None if lam is None else {"lam": lam, "lam_t": plan.solution.duals.get("lam_t", [])}
         return base.with_x0(x0, dts / tu), U, duals
 

@@ -6,8 +6,8 @@ import numpy as np
 import pytest
 
 from daddy_core.errors import DaddyError
-from daddy_ros.demo import PLANS_DIR, T0_S
-from daddy_ros.planner import MIN_STAGE_FRACTION, GuidancePlanner, InputRejected
+from daddy_ros.demo import PLANS_DIR, T0_S, flight_steps
+from daddy_ros.planner import MIN_STAGE_FRACTION, MIN_STAGES_LEFT, GuidancePlanner, InputRejected
 
 
 @pytest.fixture(scope="module")
@@ -38,6 +38,36 @@ def test_shift_drops_executed_stages_and_keeps_time_to_go(planner):
     np.testing.assert_array_equal(U, plan.solution.U[1:])   # the merged stage flies stage 1's
     with pytest.raises(InputRejected, match="ended"):
         planner.shifted_problem(plan, plan.end_s + 1.0, x0)
+
+
+def test_shift_regrids_the_last_stages(planner):
+    plan = planner.plan
+    dt = plan.stage_dt_s
+    x0 = planner.plan.solution.X[0]
+    tu = planner.units.tu_s
+    # half of the last stage left: re-gridded into MIN_STAGES_LEFT equal stages flying its thrust
+    t = plan.end_s - 0.5 * dt[-1]
+    prob, U, duals = planner.shifted_problem(plan, t, x0)
+    assert prob.N == MIN_STAGES_LEFT
+    np.testing.assert_allclose(prob.stage_dt * tu, np.full(MIN_STAGES_LEFT, 0.5 * dt[-1] / MIN_STAGES_LEFT))
+    np.testing.assert_array_equal(U, np.tile(plan.solution.U[-1], (MIN_STAGES_LEFT, 1)))
+    assert duals["lam"].shape[1] == MIN_STAGES_LEFT
+    # two stages left: each new stage takes the control of the old stage holding its midpoint
+    t = plan.end_s - dt[-2] - dt[-1]
+    prob, U, _ = planner.shifted_problem(plan, t, x0)
+    assert np.sum(prob.stage_dt) * tu == pytest.approx(dt[-2] + dt[-1])
+    np.testing.assert_array_equal(U, plan.solution.U[[-2, -2, -1, -1]])
+
+
+def test_flight_steps_cover_the_transfer_and_shrink_to_the_end():
+    steps = list(flight_steps(0.0, 10, 1.0, 2, 2, 2, 8, 1 / 64))
+    starts, ends, replan = (np.array(v) for v in zip(*steps))
+    np.testing.assert_allclose(starts[1:], ends[:-1])             # contiguous
+    assert starts[0] == 0.0 and ends[-1] == pytest.approx(10.0)
+    assert not replan[-1] and ends[-1] - starts[-1] == pytest.approx(1 / 64)
+    assert replan[starts >= 8.0][:-1].all()                       # every final step re-plans
+    periodic = starts[replan & (starts < 8.0)]
+    np.testing.assert_allclose(periodic, [2.0, 4.0, 6.0])
 
 
 @pytest.mark.parametrize("pos_scale, vel_nan, mass, stamp, now, field", [
