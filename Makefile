@@ -35,7 +35,7 @@ $(STAMP): requirements/pins.txt requirements/core.txt requirements/ros.txt setup
 	$(PY) -m pip install --disable-pip-version-check -q --no-deps -e .; \
 	touch $@
 
-DEMO_CASE ?= earth_mars
+DEMO_CASE ?= halo_l2_l1
 demo: $(STAMP)
 	$(VENV)/bin/gnc_demo --case $(DEMO_CASE)
 
