@@ -49,19 +49,26 @@ def main():
         if not (PLANS_DIR / f"{case}_fuel.json").exists():
             print(f"{case}: no bundled nominal plan, skipped")
             continue
-        warm, cold_ok, cold_t = [], 0, []
+        cold_ok, cold_t = 0, []
+        warm = {True: [], False: []}   # restore_first (the node's default) or not
         for i in range(args.trials):
-            planner, _ = nominal_planner(case, 600.0)
-            p, v, m, t = perturbed_state(case, planner, rng, dr, dv)
-            out = planner.replan(p, v, m, t, f"w{i}", now_s=t)
-            warm.append(out.solve_time_s * 1e3)
-            if i == 0:
-                print(f"{case}: warm replan level {out.level} ({out.reason}), "
-                      f"{out.iterations}", flush=True)
-        med = statistics.median(warm)
-        print(f"{case}: warm-started replan median {med:.0f} ms (max {max(warm):.0f}) over "
-              f"{args.trials}; target {TARGET_MS[case]:.0f} ms (ratio {med / TARGET_MS[case]:.1f}); "
-              f"CasADi peer {PEER_MS[case]:.0f} ms (ratio {med / PEER_MS[case]:.1f})", flush=True)
+            for restore in warm:
+                planner, _ = nominal_planner(case, 600.0)
+                planner.replan_options = planner.replan_options.with_(restore_warm_start=restore)
+                p, v, m, t = perturbed_state(case, planner, np.random.default_rng(i), dr, dv)
+                out = planner.replan(p, v, m, t, f"w{i}", now_s=t)
+                warm[restore].append(out.solve_time_s * 1e3)
+                if i == 0:
+                    print(f"{case} (restore_first={restore}): warm replan level {out.level} "
+                          f"({out.reason}), {out.iterations}, final mass "
+                          f"{out.plan.solution.final_mass_kg if out.plan else float('nan'):.3f}"
+                          " kg", flush=True)
+        for restore, times in warm.items():
+            med = statistics.median(times)
+            print(f"{case}: warm-started replan (restore_first={restore}) median {med:.0f} ms "
+                  f"(max {max(times):.0f}) over {args.trials}; target {TARGET_MS[case]:.0f} ms "
+                  f"(ratio {med / TARGET_MS[case]:.1f}); CasADi peer {PEER_MS[case]:.0f} ms "
+                  f"(ratio {med / PEER_MS[case]:.1f})", flush=True)
         if args.no_cold:
             continue
         planner, _ = nominal_planner(case, 600.0)

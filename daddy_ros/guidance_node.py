@@ -52,6 +52,8 @@ PARAMETERS = {  # name: (default, description)
     "tol_aul": (0.0, "augmented-Lagrangian tolerance (0: the case's own)"),
     "tol_newton": (0.0, "Newton polishing tolerance (0: the case's own)"),
     "time_budget_s": (60.0, "wall-clock budget of one re-optimisation [s]"),
+    "restore_first": (True, "restore feasibility of the warm start by Newton before DDP, so a "
+                            "re-optimisation stopped by its budget still yields a feasible plan"),
     "staleness_s": (600.0, "estimates older than this relative to the request are rejected [s]"),
     "frame_id": ("earth_moon_rotating", "frame of state estimates and thrust"),
     "plan_file": ("", "nominal plan (solution JSON) adopted at the first estimate; empty: the "
@@ -88,7 +90,7 @@ class GuidanceNode(Node):
             scenario=g("scenario"), method=g("method"), polish=g("polish"),
             fuel_optimal=g("fuel_optimal"), stages=g("stages"), time_budget_s=g("time_budget_s"),
             staleness_s=g("staleness_s"), tol_aul=g("tol_aul") or None,
-            tol_newton=g("tol_newton") or None)
+            tol_newton=g("tol_newton") or None, restore_first=g("restore_first"))
         self.plan_file = g("plan_file") or self._bundled_plan()
         self._lock = threading.Lock()
         self._wake = threading.Condition(self._lock)
