@@ -296,6 +296,11 @@ class GuidancePlanner:
             opts = self.options
         else:
             opts = self.replan_options
+            if problem.u_max is not None and np.max(np.linalg.norm(U_guess, axis=1)) > \
+                    problem.u_max * (1 + SATURATION_SLACK):
+                # the current plan already flies beyond the derating (its margin is spent):
+                # re-plan on the full rating instead of failing on the derated bound first
+                problem = self._full_rating(problem)
         t0 = time.perf_counter()
         try:
             sol = solve(problem, U_guess, method=self.method, fuel_optimal=None, polish=self.polish,
@@ -315,7 +320,7 @@ class GuidancePlanner:
         dt = time.perf_counter() - t0
         if not (safe and feasible) and self.full_problem.u_max > problem.u_max:
             # the margin is spent: allow the full thrust rating
-            full = replace(problem, u_max=self.full_problem.u_max, g_ineq=self.full_problem.g_ineq)
+            full = self._full_rating(problem)
             try:
                 sol2 = solve(full, sol.U if safe else U_guess, method=self.method,
                              fuel_optimal=None, polish=self.polish, options=opts,
@@ -349,6 +354,10 @@ class GuidancePlanner:
         if dt > self.time_budget_s:
             level, reason = "WARN", f"solve took {dt:.3g} s, over the {self.time_budget_s:.3g} s budget"
         return ReplanOutcome(True, level, reason, request_id, dt, plan, sol.iterations, warm)
+
+    def _full_rating(self, problem):
+        """``problem`` with the full thrust rating instead of the derated bound."""
+        return replace(problem, u_max=self.full_problem.u_max, g_ineq=self.full_problem.g_ineq)
 
     def _assess(self, sol: Solution, problem):
         """(safe to fly, meets every constraint, reason, X, terminal miss). Safe: finite and
@@ -385,7 +394,9 @@ class GuidancePlanner:
             return (False, False, f"solution violates a path constraint by {np.max(g[:ni]):.2e}",
                     None, np.inf)
         miss = max(self._miss(problem, X), repro)
-        if miss > max(1e-6, 10 * self.options.tol_aul):
+        # feasible: the terminal constraints met to the solver's final tolerance (with slack)
+        tol = max(1e-8, 10 * self.options.tol_newton) if self.polish else 10 * self.options.tol_aul
+        if miss > tol:
             return True, False, f"terminal constraint missed by {miss:.2e} (normalised)", X, miss
         return True, True, "", X, miss
 
