@@ -130,7 +130,7 @@ class GuidancePlanner:
         # mu = 1 the first DDP pass trades the constraints away (halo: violation 1e-3 -> 1.8)
         # and the solve needs > 120 s instead of ~36 s.
         # From the warm start: shortened DDP steps raise the Quu damping instead of crawling
-        # (halo warm replan 33 s -> ~7 s) and rho carries over between solves. restore_first:
+        # (halo warm replan 33 s -> ~4 s) and rho carries over between solves. restore_first:
         # Newton first restores feasibility, so that a solve stopped by its time budget still
         # flies a feasible plan from the new state (costs ~0.3 s on Earth-Mars).
         self.replan_options = self.options.with_(homotopy=self.options.homotopy[-1:],
