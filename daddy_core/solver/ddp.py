@@ -248,6 +248,11 @@ def ddp(st: Stages, sweep: str, dyn: bool, opts, stats: DDPStats, deadline: floa
             return DDPResult(st, False, it - 1, "time budget exceeded", rho, last)
         t0 = time.perf_counter()
         gains = backward_sweep(st, sweep, rho)
+        if gains is None and sweep != "std":
+            # far from the optimum the dynamics-Hessian terms can make Q_uu indefinite through
+            # V_xx (Earth-Mars cold start: ~70 failed Hess sweeps until rho ~ 1e6, then the
+            # outcome hung on round-off): take the Gauss-Newton sweep at this rho instead
+            gains = backward_sweep(st, "std", rho)
         stats.backward_s += time.perf_counter() - t0
         if gains is None:
             rho = _raise_rho(rho, opts)
