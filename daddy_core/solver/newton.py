@@ -43,7 +43,7 @@ class _Model:
     def __init__(self, problem, X, U, active_tol, F=None):
         p = self.p = problem
         self.X, self.U = X, U
-        nx, _nu, N = p.nx, p.nu, p.N
+        nx, N = p.nx, p.N
         self.F = F if F is not None else expand_dynamics(p, X[:-1], U, p.stage_dt)  # (nx, N)
         z = da.variables(np.concatenate([X[:-1].T, U.T]), order=2)
         g, ni = p.path_constraints(z[:nx], z[nx:], p.stage_dt)
