@@ -219,8 +219,9 @@ class DDPResult:
 _LS_BATCH = 2  # line-search step lengths propagated together
 
 
-def _raise_rho(rho: float, opts) -> float:
-    return max(rho * opts.rho_factor, opts.rho_min)
+def _raise_rho(rho: float, opts, growth: float | None = None) -> float:
+    """rho times ``growth`` (default opts.rho_factor), at least opts.rho_min."""
+    return max(rho * (opts.rho_factor if growth is None else growth), opts.rho_min)
 
 
 def _lower_rho(rho: float, opts) -> float:
@@ -284,8 +285,7 @@ def ddp(st: Stages, sweep: str, dyn: bool, opts, stats: DDPStats, deadline: floa
                     break
         stats.forward_s += time.perf_counter() - t0
         if not accepted:
-            rho = (max(rho * opts.short_step_rho_growth, opts.rho_min) if opts.short_step
-                   else _raise_rho(rho, opts))
+            rho = _raise_rho(rho, opts, opts.short_step_rho_growth if opts.short_step else None)
             if rho > opts.rho_max:
                 return DDPResult(st, False, it, "line search failed up to rho_max", rho, last)
             continue
@@ -303,7 +303,7 @@ def ddp(st: Stages, sweep: str, dyn: bool, opts, stats: DDPStats, deadline: floa
             # the quadratic model promised far more than the step delivered (e.g. controls in the
             # linear part of the pseudo-Huber cost, whose tiny curvature asks for huge steps):
             # damp it, Levenberg-Marquardt-like, rather than crawl on with tiny alphas
-            rho = max(rho * opts.short_step_rho_growth, opts.rho_min)
+            rho = _raise_rho(rho, opts, opts.short_step_rho_growth)
         else:
             rho = _lower_rho(rho, opts)
         if dyn:

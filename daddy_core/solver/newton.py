@@ -33,35 +33,36 @@ class PolishResult:
     improved: bool
     iterations: int
     reason: str
-    F: object = None  # stage maps expanded at (X, U) (a DA (nx, N)), or None
+
+
+def _active(g0: np.ndarray, n_ineq: int, active_tol: float) -> np.ndarray:
+    """Rows of constraint values g0 that Newton drives to zero: every equality and the
+    inequalities with g > -active_tol."""
+    act = np.ones(g0.shape, dtype=bool)
+    act[:n_ineq] = g0[:n_ineq] > -active_tol
+    return act
 
 
 class _Model:
-    """Order-2 expansion of the active constraints at one Y (F: the stage maps at (X, U) when
-    the caller has them already)."""
+    """Order-2 expansion of the active constraints at one Y."""
 
-    def __init__(self, problem, X, U, active_tol, F=None):
+    def __init__(self, problem, X, U, active_tol):
         p = self.p = problem
         self.X, self.U = X, U
         nx, N = p.nx, p.N
-        self.F = F if F is not None else expand_dynamics(p, X[:-1], U, p.stage_dt)  # (nx, N)
+        self.F = expand_dynamics(p, X[:-1], U, p.stage_dt)            # (nx, N)
         z = da.variables(np.concatenate([X[:-1].T, U.T]), order=2)
         g, ni = p.path_constraints(z[:nx], z[nx:], p.stage_dt)
         self.G = g
         if g is not None:
-            g0 = g.cons
-            act = np.ones(g0.shape, dtype=bool)
-            act[:ni] = g0[:ni] > -active_tol
-            self.g_active = act                                        # (n_c, N)
+            self.g_active = _active(g.cons, ni, active_tol)             # (n_c, N)
         else:
             self.g_active = np.zeros((0, N), dtype=bool)
         xn = da.variables(X[-1], order=2)
         gt, nti = p.terminal_constraints(xn)
         self.Gt = gt
         if gt is not None:
-            act_t = np.ones(gt.shape, dtype=bool)
-            act_t[:nti] = gt.cons[:nti] > -active_tol
-            self.t_active = act_t
+            self.t_active = _active(gt.cons, nti, active_tol)
         else:
             self.t_active = np.zeros(0, dtype=bool)
         self._build_jacobian()
@@ -177,23 +178,16 @@ def _active_residual_max(problem, X, U, active_tol: float) -> float:
     g, ni = problem.path_constraints(X[:-1].T, U.T, problem.stage_dt)
     if g is not None:
         g = np.asarray(g, dtype=float)
-        act = np.ones(g.shape, dtype=bool)
-        act[:ni] = g[:ni] > -active_tol
-        vals.append(np.abs(g[act]))
+        vals.append(np.abs(g[_active(g, ni, active_tol)]))
     gt, nti = problem.terminal_constraints(X[-1])
     if gt is not None:
         gt = np.asarray(gt, dtype=float)
-        act_t = np.ones(gt.shape, dtype=bool)
-        act_t[:nti] = gt[:nti] > -active_tol
-        vals.append(np.abs(gt[act_t]))
+        vals.append(np.abs(gt[_active(gt, nti, active_tol)]))
     return float(np.max(np.concatenate(vals)))
 
 
-def polish(problem, X, U, opts, deadline: float | None = None, F=None) -> PolishResult:
-    """Alg. 11 from (X, U) to max active-constraint violation <= opts.tol_newton.
-
-    F: the stage maps already expanded at (X, U) (saves one batched expansion). The result
-    carries the maps at the returned (X, U)."""
+def polish(problem, X, U, opts, deadline: float | None = None) -> PolishResult:
+    """Alg. 11 from (X, U) to max active-constraint violation <= opts.tol_newton."""
     X0, U0 = X.copy(), U.copy()
     gamma = 0.5
     it = 0
@@ -208,18 +202,17 @@ def polish(problem, X, U, opts, deadline: float | None = None, F=None) -> Polish
             # another iteration (saves one batched DA expansion per polish)
             dmax = _active_residual_max(problem, X, U, opts.newton_active_tol)
             if dmax <= opts.tol_newton:
-                best = (dmax, X.copy(), U.copy(), None)
+                best = (dmax, X.copy(), U.copy())
                 reason = "active constraints below tol_newton"
                 break
-        model = _Model(problem, X, U, opts.newton_active_tol, F)
-        F = None
+        model = _Model(problem, X, U, opts.newton_active_tol)
         d = model.residual()
         dmax = float(np.max(np.abs(d))) if d.size else 0.0
         if not np.isfinite(dmax):
             reason = "constraint evaluation produced NaN"
             break
         if best is None or dmax < best[0]:
-            best = (dmax, X.copy(), U.copy(), model.F)
+            best = (dmax, X.copy(), U.copy())
         if dmax <= opts.tol_newton:
             reason = "active constraints below tol_newton"
             break
@@ -260,7 +253,7 @@ def polish(problem, X, U, opts, deadline: float | None = None, F=None) -> Polish
         X, U = model.apply(dY)
     if best is None:
         return PolishResult(X0, U0, np.inf, False, False, it, reason)
-    dbest, Xb, Ub, Fb = best
+    dbest, Xb, Ub = best
     # report the violation of all constraints (inactive inequalities included)
     viol = max(dbest, total_violation(problem, Xb, Ub))
-    return PolishResult(Xb, Ub, viol, viol <= opts.tol_newton, True, it, reason, Fb)
+    return PolishResult(Xb, Ub, viol, viol <= opts.tol_newton, True, it, reason)

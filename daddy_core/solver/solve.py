@@ -131,14 +131,14 @@ def solve(problem, u_guess=None, method: str = "dyn", fuel_optimal: bool | None 
     if not np.all(np.isfinite(X)):
         raise DaddyError("the initial guess propagates to a non-finite state")
     U = U0
-    restored, restore_iters, F = None, 0, None  # F: exact stage maps at (X, U), if any
+    restored, restore_iters = None, 0
     if opts.restore_warm_start:
         # a feasible iterate first (Newton, Alg. 11), so that a solve stopped by its time budget
         # still returns a trajectory that meets every constraint
         pres = newton_polish(problem, X, U, opts, deadline)
         restore_iters = pres.iterations
         if pres.converged:
-            X, U, F = pres.X, pres.U, pres.F
+            X, U = pres.X, pres.U
             restored = (X, U)
         if progress:
             progress(f"warm start restored by Newton: {pres.iterations} iterations, max violation"
@@ -164,8 +164,7 @@ def solve(problem, u_guess=None, method: str = "dyn", fuel_optimal: bool | None 
         mult.mu[...] = opts.mu_init
         mult.mu_t[...] = opts.mu_init
         res = aul(problem, X, U, mult, hom, sweep, dyn, opts, stats, deadline, progress,
-                  rho0=rho, F=F)
-        F = None  # the next homotopy step expands its own maps
+                  rho0=rho)
         gains = res.gains or gains
         rho_last = res.rho
         aul_iters += res.iterations
