@@ -3,6 +3,7 @@ import numpy as np
 import pytest
 
 from daddy_core import da
+from daddy_core.errors import DaddyError
 
 
 def poly_map(k, shape=(4,)):
@@ -43,6 +44,22 @@ def test_composition_associative_and_shift(k):
     np.testing.assert_allclose(da.shift(f, s).cons, da.evaluate(f, s), rtol=1e-13)
     # plugging a map into a polynomial equals evaluating on its constants
     np.testing.assert_allclose(da.compose(f, ident + s).cons, da.evaluate(f, s), rtol=1e-13)
+
+
+@pytest.mark.parametrize("shape, dv_shape", [((7, 12), (5, 12)), ((3,), (5,)), ((4,), (5, 4)),
+                                             ((), (5,))])
+def test_order2_shift_equals_composition(shape, dv_shape):
+    # the closed-form order-2 re-centring is the general composition with dv + identity
+    rng = np.random.default_rng(3)
+    t = da.tables(5, 2)
+    f = da.DA(rng.normal(size=(t.size,) + shape), t)
+    dv = rng.normal(size=dv_shape) * 0.3
+    fast = da.shift(f, dv)
+    slow = da.compose(f, da.variables(dv, order=2, n=5))
+    assert fast.c.shape == slow.c.shape
+    np.testing.assert_allclose(fast.c, slow.c, rtol=1e-13, atol=1e-14)
+    with pytest.raises(DaddyError, match="leading axis"):
+        da.shift(f, np.zeros(4))
 
 
 def test_radius_order2_formula_and_inf():

@@ -97,11 +97,52 @@ def compose(p: DA, g: DA) -> DA:
 
 
 def shift(p: DA, dv) -> DA:
-    """Re-centre ``p`` at displacement ``dv`` (shape (n,) or (n, *batch)): p(dv + dx)."""
+    """Re-centre ``p`` at displacement ``dv`` (shape (n,) or (n, *batch)): p(dv + dx).
+
+    Order 2 (the solver's maps) in closed form: the value is p(dv), the gradient gains the
+    quadratic terms' derivative at dv, the quadratic terms are unchanged -- the same truncated
+    polynomial as the general composition, for a few BLAS calls. Other orders compose.
+    """
     from .core import variables
     dv = np.asarray(dv, dtype=float)
-    g = variables(dv, order=p.order, n=p.n)
-    return compose(p, g)
+    if p.T.k != 2:
+        return compose(p, variables(dv, order=p.order, n=p.n))
+    T, c = p.T, p.c
+    if dv.shape[:1] != (T.n,):
+        raise DaddyError(f"shift: displacement must have leading axis n={T.n}, got {dv.shape}")
+    shape = np.broadcast_shapes(c.shape[1:], dv.shape[1:])
+    c = np.broadcast_to(c, (T.size,) + shape)
+    d = np.broadcast_to(dv.reshape(dv.shape[:1] + (1,) * (len(shape) - dv.ndim + 1)
+                                   + dv.shape[1:]), (T.n,) + shape)
+    n, q = T.n, c[T.block[2]]                                     # (n(n+1)/2, *shape)
+    out = np.empty((T.size,) + shape)
+    out[0] = evaluate(DA(c, T), d)
+    # d/dz_a of c_ab z_a z_b at dv is c_ab dv_b (and c_ab dv_a for b; 2 c_aa dv_a when a = b)
+    lin = (q * d[T.triu_j]).reshape(len(q), -1)
+    lin2 = (q * d[T.triu_i]).reshape(len(q), -1)
+    grad = _SCATTER_I[n] @ lin + _SCATTER_J[n] @ lin2
+    out[1:n + 1] = c[1:n + 1] + grad.reshape((n,) + shape)
+    out[n + 1:] = q
+    return DA(out, T)
+
+
+class _Scatter(dict):
+    """(n, n(n+1)/2) 0/1 matrices summing the degree-2 monomials' terms onto their first
+    (``_SCATTER_I``) or second (``_SCATTER_J``) variable, built once per n."""
+
+    def __init__(self, second: bool):
+        super().__init__()
+        self.second = second
+
+    def __missing__(self, n: int) -> np.ndarray:
+        i, j = np.triu_indices(n)
+        m = np.zeros((n, len(i)))
+        m[j if self.second else i, np.arange(len(i))] = 1.0
+        self[n] = m
+        return m
+
+
+_SCATTER_I, _SCATTER_J = _Scatter(False), _Scatter(True)
 
 
 def radius(p: DA, eps: float, axis: int | None = 0) -> np.ndarray:

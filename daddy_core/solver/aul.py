@@ -39,11 +39,13 @@ def update_multipliers(mult: Multipliers, g, gt, opts) -> Multipliers:
 
 
 def aul(problem, X, U, mult: Multipliers, hom, sweep: str, dyn: bool, opts, stats: DDPStats,
-        deadline: float | None = None, progress=None, rho0: float | None = None) -> AULResult:
+        deadline: float | None = None, progress=None, rho0: float | None = None,
+        F=None) -> AULResult:
     """Alg. 4: DDP on the augmented cost, multiplier and penalty updates, until the maximum
     constraint violation is below tol_aul. rho0: Quu regularisation to start from (None:
-    opts.rho_init); with opts.carry_rho each DDP solve resumes from the previous one's."""
-    st = Stages(problem, X, U, mult, hom, opts.eps_da)
+    opts.rho_init); with opts.carry_rho each DDP solve resumes from the previous one's.
+    F: stage maps at (X, U) if already known (else expanded here)."""
+    st = Stages(problem, X, U, mult, hom, opts.eps_da, F=F)
     gains = None
     reason = "aul_max_iter reached"
     gmax = np.inf

@@ -17,7 +17,7 @@ from scipy.linalg import LinAlgError, cho_factor, cho_solve
 
 from .. import da
 from ..errors import DaddyError
-from .expansion import Stages, augmented_cost, expand_dynamics
+from .expansion import Stages, augmented_cost, expand_dynamics, maps_at
 
 
 @dataclass
@@ -193,16 +193,9 @@ def _integrate(p, X: np.ndarray, U: np.ndarray, dt: float) -> np.ndarray:
 def new_maps(st: Stages, X, U, poly, dz, dyn: bool):
     """Stage maps at the new nominal: one batched expansion of the integrated stages and one
     batched re-centring (composition) of the stages served by their polynomial."""
-    p = st.problem
-    if not dyn or not np.any(poly):
-        return expand_dynamics(p, X[:-1], U, p.stage_dt)
-    c = np.empty_like(st.F.c)
-    inside = np.flatnonzero(poly)
-    outside = np.flatnonzero(~poly)
-    c[..., inside] = da.shift(st.F[:, inside], dz[:, inside]).c
-    if outside.size:
-        c[..., outside] = expand_dynamics(p, X[outside], U[outside], p.stage_dt[outside]).c
-    return da.DA(c, st.F.T)
+    if not dyn:
+        return expand_dynamics(st.problem, X[:-1], U, st.problem.stage_dt)
+    return maps_at(st.problem, st.F, dz, poly, X, U)
 
 
 # ----------------------------------------------------------------------------------- the loop

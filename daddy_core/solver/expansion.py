@@ -122,6 +122,31 @@ def expand_dynamics(problem, X: np.ndarray, U: np.ndarray, dt: np.ndarray):
     return problem.step(z[:problem.nx], z[problem.nx:], dt)
 
 
+def maps_at(problem, F, dz: np.ndarray, inside: np.ndarray, X: np.ndarray, U: np.ndarray):
+    """Stage maps at a new nominal from maps F of a nearby one (paper eq. 11 / Alg. 8).
+
+    The stages flagged ``inside`` (deviation within F's convergence radius) are re-centred by
+    one batched composition, the others re-expanded in one batched DA call.
+
+    Args:
+        F: DA (nx, N) order-2 stage maps at the old nominal.
+        dz: (n, N) deviations [dx; du] of the new nominal's stages from the old.
+        inside: (N,) bool, stages to re-centre.
+        X: (N+1, nx) or (N, nx) new stage start states; U: (N, nu) new controls.
+    Returns:
+        DA (nx, N) centred at (X[k], U[k]).
+    """
+    if not np.any(inside):
+        return expand_dynamics(problem, X[:problem.N], U, problem.stage_dt)
+    c = np.empty_like(F.c)
+    idx_in, idx_out = np.flatnonzero(inside), np.flatnonzero(~inside)
+    c[..., idx_in] = da.shift(F[:, idx_in], dz[:, idx_in]).c
+    if idx_out.size:
+        c[..., idx_out] = expand_dynamics(problem, X[idx_out], U[idx_out],
+                                          problem.stage_dt[idx_out]).c
+    return da.DA(c, F.T)
+
+
 def augmented_stage_cost(problem, x, u, mult: Multipliers, hom):
     """l~ (eq. 8) of every stage, (N,): floats or DA alike."""
     lt = problem.stage_cost(x, u, problem.stage_dt, hom)

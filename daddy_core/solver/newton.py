@@ -21,7 +21,8 @@ import scipy.sparse as sp
 from scipy.linalg import LinAlgError, cho_solve_banded, cholesky_banded
 
 from .. import da
-from .expansion import expand_dynamics, total_violation
+from ..errors import DaddyError
+from .expansion import expand_dynamics, maps_at, total_violation
 
 
 @dataclass
@@ -33,6 +34,7 @@ class PolishResult:
     improved: bool
     iterations: int
     reason: str
+    maps: tuple | None = None  # (F, Xc, Uc): the last model's stage maps and their centre
 
 
 def _active(g0: np.ndarray, n_ineq: int, active_tol: float) -> np.ndarray:
@@ -46,11 +48,11 @@ def _active(g0: np.ndarray, n_ineq: int, active_tol: float) -> np.ndarray:
 class _Model:
     """Order-2 expansion of the active constraints at one Y."""
 
-    def __init__(self, problem, X, U, active_tol):
+    def __init__(self, problem, X, U, active_tol, F=None):
         p = self.p = problem
         self.X, self.U = X, U
         nx, N = p.nx, p.N
-        self.F = expand_dynamics(p, X[:-1], U, p.stage_dt)            # (nx, N)
+        self.F = expand_dynamics(p, X[:-1], U, p.stage_dt) if F is None else F   # (nx, N)
         z = da.variables(np.concatenate([X[:-1].T, U.T]), order=2)
         g, ni = p.path_constraints(z[:nx], z[nx:], p.stage_dt)
         self.G = g
@@ -170,11 +172,11 @@ class _BandedSigma:
         return -(self.D.T @ cho_solve_banded((self.cb, False), d))
 
 
-def _active_residual_max(problem, X, U, active_tol: float) -> float:
-    """max |Gamma(Y)| in floats (one batched float integration of the stages): the same active
-    set and values as ``_Model.residual()`` at Y, without the order-2 expansion."""
-    h = X[1:].T - problem.step(X[:-1].T, U.T, problem.stage_dt)            # (nx, N)
-    vals = [np.abs(h).ravel()]
+def _float_residual(problem, X, U, active_tol: float):
+    """Gamma(Y) in floats: the stage flows f(x_k, u_k) (nx, N) from one batched float
+    integration, and max |Gamma(Y)| over the same active set as ``_Model.residual()``."""
+    fx = problem.step(X[:-1].T, U.T, problem.stage_dt)                     # (nx, N)
+    vals = [np.abs(X[1:].T - fx).ravel()]
     g, ni = problem.path_constraints(X[:-1].T, U.T, problem.stage_dt)
     if g is not None:
         g = np.asarray(g, dtype=float)
@@ -183,31 +185,57 @@ def _active_residual_max(problem, X, U, active_tol: float) -> float:
     if gt is not None:
         gt = np.asarray(gt, dtype=float)
         vals.append(np.abs(gt[_active(gt, nti, active_tol)]))
-    return float(np.max(np.concatenate(vals)))
+    return fx, float(np.max(np.concatenate(vals)))
 
 
-def polish(problem, X, U, opts, deadline: float | None = None) -> PolishResult:
-    """Alg. 11 from (X, U) to max active-constraint violation <= opts.tol_newton."""
+def stage_maps(problem, maps, X, U, eps_da: float, fx=None):
+    """Order-2 stage maps at (X[:-1], U), with the exact float flows ``fx`` as values if given.
+
+    ``maps`` = (F, Xc, Uc): maps of a nearby nominal (the DDP's last, or the previous Newton
+    iterate's). Stages whose deviation lies inside F's convergence radius at ``eps_da`` are
+    re-centred by composition, the rest re-expanded (``maps_at``); ``maps`` None: expand all.
+    With ``fx``, the constant part is replaced by it, so a model's residual at Y is exact and
+    only its derivatives carry the re-centring's truncation error.
+    """
+    if maps is None:
+        F = expand_dynamics(problem, X[:-1], U, problem.stage_dt)
+    else:
+        F0, Xc, Uc = maps
+        dz = np.concatenate([(X[:-1] - Xc[:-1]).T, (U - Uc).T])                # (n, N)
+        inside = np.sqrt(np.sum(dz * dz, axis=0)) < da.radius(F0, eps_da)
+        F = maps_at(problem, F0, dz, inside, X, U)
+    if fx is None:
+        return F
+    c = F.c.copy()
+    c[0] = fx
+    return da.DA(c, F.T)
+
+
+def polish(problem, X, U, opts, deadline: float | None = None, maps=None) -> PolishResult:
+    """Alg. 11 from (X, U) to max active-constraint violation <= opts.tol_newton.
+
+    The constraint values Gamma(Y) are always exact (one batched float integration of every
+    stage per outer iteration). The stage maps that give their derivatives are re-centred from
+    the previous outer iteration's -- first from ``maps`` = (F, Xc, Uc), e.g. the DDP's last
+    stage maps -- where the step stayed inside their convergence radius (paper eq. 11, as in the
+    Dyn forward pass) and re-expanded elsewhere. Newton on these derivatives converges at a rate
+    set by their truncation error; an outer iteration that does not reduce the exact residual
+    makes the next one expand every stage afresh.
+    """
     X0, U0 = X.copy(), U.copy()
     gamma = 0.5
     it = 0
     best = None
     reason = "newton_max_iter reached"
+    prev_dmax, fresh = np.inf, True
     while it < opts.newton_max_iter:
         if deadline is not None and time.perf_counter() > deadline:
             reason = "time budget exceeded"
             break
-        if it > 0:
-            # after a step, test convergence in floats first: the expansion is only needed for
-            # another iteration (saves one batched DA expansion per polish)
-            dmax = _active_residual_max(problem, X, U, opts.newton_active_tol)
-            if dmax <= opts.tol_newton:
-                best = (dmax, X.copy(), U.copy())
-                reason = "active constraints below tol_newton"
-                break
-        model = _Model(problem, X, U, opts.newton_active_tol)
-        d = model.residual()
-        dmax = float(np.max(np.abs(d))) if d.size else 0.0
+        try:
+            fx, dmax = _float_residual(problem, X, U, opts.newton_active_tol)
+        except (DaddyError, FloatingPointError, OverflowError):
+            dmax = np.inf
         if not np.isfinite(dmax):
             reason = "constraint evaluation produced NaN"
             break
@@ -216,6 +244,13 @@ def polish(problem, X, U, opts, deadline: float | None = None) -> PolishResult:
         if dmax <= opts.tol_newton:
             reason = "active constraints below tol_newton"
             break
+        if dmax >= prev_dmax and not fresh:
+            maps = None   # the re-centred derivatives did not help: expand afresh
+        prev_dmax = dmax
+        fresh = maps is None
+        model = _Model(problem, X, U, opts.newton_active_tol,
+                       F=stage_maps(problem, maps, X, U, opts.eps_da, fx))
+        d = model.residual()
         try:
             sigma = _BandedSigma(model.D, opts.newton_regularisation)
         except (LinAlgError, ValueError):
@@ -248,12 +283,16 @@ def polish(problem, X, U, opts, deadline: float | None = None) -> PolishResult:
             inner += 1
         it += 1
         if inner == 0:
+            if not fresh:   # re-centred derivatives gave no descent: expand afresh
+                maps, prev_dmax, fresh = None, np.inf, True
+                continue
             reason = "no descent on the constraint model"
             break
+        maps = (model.F, X, U)
         X, U = model.apply(dY)
     if best is None:
-        return PolishResult(X0, U0, np.inf, False, False, it, reason)
+        return PolishResult(X0, U0, np.inf, False, False, it, reason, maps)
     dbest, Xb, Ub = best
     # report the violation of all constraints (inactive inequalities included)
     viol = max(dbest, total_violation(problem, Xb, Ub))
-    return PolishResult(Xb, Ub, viol, viol <= opts.tol_newton, True, it, reason)
+    return PolishResult(Xb, Ub, viol, viol <= opts.tol_newton, True, it, reason, maps)

@@ -11,7 +11,7 @@ from ..errors import DaddyError
 from .aul import aul
 from .ddp import DDPStats
 from .expansion import Multipliers, total_violation
-from .newton import polish as newton_polish
+from .newton import polish as newton_polish, stage_maps
 from .options import SolverOptions, parse_method
 from .solution import Solution
 
@@ -128,10 +128,12 @@ def solve(problem, u_guess=None, method: str = "dyn", fuel_optimal: bool | None 
     deadline = None if opts.time_budget_s is None else t_start + opts.time_budget_s
     stats = DDPStats()
     X = problem.rollout(U0)
+    t_rollout = time.perf_counter() - t_start
     if not np.all(np.isfinite(X)):
         raise DaddyError("the initial guess propagates to a non-finite state")
     U = U0
-    restored, restore_iters = None, 0
+    restored, restore_iters, F0 = None, 0, None
+    t0 = time.perf_counter()
     if opts.restore_warm_start:
         # a feasible iterate first (Newton, Alg. 11), so that a solve stopped by its time budget
         # still returns a trajectory that meets every constraint
@@ -140,9 +142,13 @@ def solve(problem, u_guess=None, method: str = "dyn", fuel_optimal: bool | None 
         if pres.converged:
             X, U = pres.X, pres.U
             restored = (X, U)
+            if pres.maps is not None:   # the DDP starts from the Newton model's maps, re-centred
+                F0 = stage_maps(problem, pres.maps, X, U, opts.eps_da)
         if progress:
             progress(f"warm start restored by Newton: {pres.iterations} iterations, max violation"
                      f" {pres.max_violation:.2e} ({pres.reason})")
+    t_restore = time.perf_counter() - t0
+    t_aul = time.perf_counter()
     best = (X, U)
     aul_iters = 0
     history = []
@@ -164,7 +170,7 @@ def solve(problem, u_guess=None, method: str = "dyn", fuel_optimal: bool | None 
         mult.mu[...] = opts.mu_init
         mult.mu_t[...] = opts.mu_init
         res = aul(problem, X, U, mult, hom, sweep, dyn, opts, stats, deadline, progress,
-                  rho0=rho)
+                  rho0=rho, F=F0 if st is None else st.F)
         gains = res.gains or gains
         rho_last = res.rho
         aul_iters += res.iterations
@@ -180,7 +186,7 @@ def solve(problem, u_guess=None, method: str = "dyn", fuel_optimal: bool | None 
             converged, reason = False, f"homotopy step {i + 1}: {res.reason}"
             if res.reason == "time budget exceeded":
                 break
-    t_ddp = time.perf_counter() - t_start
+    t_ddp = time.perf_counter() - t_aul
     X, U = best
     fallback = restored is not None and not converged
     if fallback:  # DDP did not finish: return the feasible, Newton-restored warm start
@@ -189,8 +195,8 @@ def solve(problem, u_guess=None, method: str = "dyn", fuel_optimal: bool | None 
     newton_iters, t_newton = restore_iters, 0.0
     if polish and not fallback:
         t0 = time.perf_counter()
-        # fresh expansions: the Dyn pass's re-centred maps are polynomial approximations, too
-        # loose for 1e-10 feasibility
+        # fresh expansions first: the Dyn pass's maps, re-centred again and again, carry
+        # derivative errors that stalled the polishing (measured on the halo re-plans)
         pres = newton_polish(problem, X, U, opts, deadline)
         t_newton = time.perf_counter() - t0
         newton_iters += pres.iterations
@@ -211,18 +217,22 @@ def solve(problem, u_guess=None, method: str = "dyn", fuel_optimal: bool | None 
     final_mass = float(X[-1, m_idx] * units.mu_kg) if m_idx is not None else None
     propellant = float((X[0, m_idx] - X[-1, m_idx]) * units.mu_kg) if m_idx is not None else None
     N, nu, nx = problem.N, problem.nu, problem.nx
+    t0 = time.perf_counter()
+    miss = repropagation_miss(problem, U)
+    t_repro = time.perf_counter() - t0
     sol = Solution(
         case=case_name or problem.name, method=method, fuel_optimal=fuel, converged=converged,
         reason=reason, X=X, U=U, stage_dt=problem.stage_dt.copy(),
         gains_a=gains.a if gains else np.zeros((N, nu)),
         gains_b=gains.b if gains else np.zeros((N, nu, nx)),
         cost=objective(problem, X, U, hom_last), max_violation=gmax, final_mass_kg=final_mass,
-        propellant_kg=propellant, repropagation_miss=repropagation_miss(problem, U),
+        propellant_kg=propellant, repropagation_miss=miss,
         iterations={"homotopy": len(history), "aul": aul_iters, "ddp": stats.iterations,
                     "newton": newton_iters},
-        runtime_s={"total": time.perf_counter() - t_start, "ddp": t_ddp, "newton": t_newton,
+        runtime_s={"total": time.perf_counter() - t_start, "rollout": t_rollout,
+                   "restore": t_restore, "ddp": t_ddp, "newton": t_newton,
                    "forward": stats.forward_s, "expansion": stats.expansion_s,
-                   "backward": stats.backward_s},
+                   "backward": stats.backward_s, "repropagation": t_repro},
         history=history,
         units={"system": units.name, "lu_km": units.lu_km, "tu_s": units.tu_s,
                "mu_kg": units.mu_kg, "thrust_unit_n": units.thrust_unit_n},
