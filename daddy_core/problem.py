@@ -125,13 +125,15 @@ class Problem:
         """Propagate controls U (N, nu) from x0 with the stage map, one stage at a time -> X."""
         X = np.empty((self.N + 1, self.nx))
         X[0] = self.x0 if x0 is None else x0
-        if getattr(self.step, "unbatched_ok", False):   # rk78's faster single-trajectory path
-            for k in range(self.N):
-                X[k + 1] = self.step(X[k], U[k], float(self.stage_dt[k]))
-            return X
         for k in range(self.N):
-            X[k + 1] = self.step(X[k][:, None], U[k][:, None], self.stage_dt[k:k + 1])[:, 0]
+            X[k + 1] = self.stage_flow(X[k], U[k], k)
         return X
+
+    def stage_flow(self, x: np.ndarray, u: np.ndarray, k: int) -> np.ndarray:
+        """State (nx,) after stage k from x (nx,) under u (nu,), in floats."""
+        if getattr(self.step, "unbatched_ok", False):   # rk78's faster single-trajectory path
+            return self.step(x, u, float(self.stage_dt[k]))
+        return self.step(x[:, None], u[:, None], self.stage_dt[k:k + 1])[:, 0]
 
 
 # ---------------------------------------------------------------------------------- builders

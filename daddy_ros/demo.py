@@ -183,22 +183,63 @@ def flight_steps(t0_s: float, N: int, dt_stage: float, substeps: int, replan_eve
     yield t, t_end, False
 
 
+class DeviationMonitor:
+    """The loop's prediction of where the schedule in force takes the spacecraft: reset to the
+    estimate at each re-optimisation, then propagated with the commanded thrust (no errors) in
+    step with the truth. A re-optimisation is due when the estimate has drifted from it by more
+    than ``max_pos_m`` or ``max_vel_m_s`` (0 disables that test)."""
+
+    def __init__(self, sim: TruthSim, max_pos_m: float, max_vel_m_s: float):
+        self.sim, self.max_pos_m, self.max_vel_m_s = sim, max_pos_m, max_vel_m_s
+        self.x = None   # normalised predicted state
+
+    def reset(self, pos, vel, mass) -> None:
+        u = self.sim.units
+        self.x = np.concatenate([u.length(pos), u.speed(vel), [u.mass(mass)]])
+
+    def advance(self, thrust_n, dt_s: float) -> None:
+        if self.x is not None:
+            self.x = self.sim.propagate(self.x, thrust_n, dt_s)
+
+    def drift(self, pos, vel) -> tuple[float, float]:
+        """(position m, velocity m/s) of the estimate from the prediction."""
+        u = self.sim.units
+        return (float(np.linalg.norm(pos - u.length_m(self.x[:3]))),
+                float(np.linalg.norm(vel - u.speed_m_s(self.x[3:6]))))
+
+    def due(self, pos, vel) -> bool:
+        if self.x is None or not (self.max_pos_m or self.max_vel_m_s):
+            return False
+        dr, dv = self.drift(pos, vel)
+        return bool((self.max_pos_m and dr > self.max_pos_m)
+                    or (self.max_vel_m_s and dv > self.max_vel_m_s))
+
+
 def fly(link, sim: TruthSim, planner: GuidancePlanner, replan_every: int, substeps: int,
         final_stages: int, final_substeps: int = 0, final_min_step: float = 1 / 64,
-        progress=None) -> dict:
+        progress=None, trigger_pos_m: float = 0.0, trigger_vel_m_s: float = 0.0) -> dict:
     """Run the closed loop to the end of the transfer (time grid: ``flight_steps``); the
-    schedule is flown piecewise constant between its stage starts. Returns the run's figures."""
+    schedule is flown piecewise constant between its stage starts. Besides the grid's
+    re-optimisations, one is asked for at any step whose estimate has drifted from the loop's
+    prediction by more than ``trigger_pos_m`` / ``trigger_vel_m_s`` (``DeviationMonitor``).
+    Returns the run's figures."""
     N = planner.base_problem.N
     dt_stage = sim.tof_s / N
     latencies, levels, flown = [], [], [sim.truth_si()[0]]
+    monitor = DeviationMonitor(sim, trigger_pos_m, trigger_vel_m_s)
+    monitor.reset(*sim.estimate_si())
+    triggered = 0
     for j, (t0, t1, replan) in enumerate(flight_steps(
             sim.t_s, N, dt_stage, substeps, replan_every, final_stages,
             final_substeps or substeps, final_min_step)):
         pos, vel, mass = sim.estimate_si()
+        if not replan and monitor.due(pos, vel):
+            replan, triggered = True, triggered + 1
         if replan:
             level, lat = link.replan(pos, vel, mass, t0, f"r{j}")
             latencies.append(lat)
             levels.append(level)
+            monitor.reset(pos, vel, mass)
             if progress:
                 progress(f"  t = {(t0 - sim.t0_s) / 86400:7.3f} d  stage "
                          f"{int((t0 - sim.t0_s) / dt_stage + 1e-9):3d}/{N}  replan {level:5s} "
@@ -208,12 +249,15 @@ def fly(link, sim: TruthSim, planner: GuidancePlanner, replan_every: int, subste
         starts = link.stage_starts()
         cuts = [t0, *starts[(starts > t0 + 1e-6) & (starts < t1 - 1e-6)], t1]
         for a, b in zip(cuts[:-1], cuts[1:]):
-            sim.apply(link.thrust_at(a, pos, vel, mass), b - a)
+            thrust = link.thrust_at(a, pos, vel, mass)
+            sim.apply(thrust, b - a)
+            monitor.advance(thrust, b - a)
         flown.append(sim.truth_si()[0])
     miss_r, miss_v = sim.miss()
     m_final = sim.truth_si()[2]
     return {"miss_km": miss_r / 1e3, "miss_cm_s": miss_v * 100, "final_mass_kg": m_final,
-            "replans": len(latencies), "latency_ms": [1e3 * x for x in latencies],
+            "replans": len(latencies), "triggered": triggered,
+            "latency_ms": [1e3 * x for x in latencies],
             "levels": levels, "flown_m": np.array(flown)}
 
 
@@ -255,7 +299,7 @@ def main(argv=None) -> int:
     ap.add_argument("--case", default="halo_l2_l1", choices=["halo_l2_l1", "earth_mars", "dro_dro"])
     ap.add_argument("--runs", type=int, default=0, help="Monte Carlo runs without the ROS graph")
     ap.add_argument("--seed", type=int, default=1)
-    ap.add_argument("--replan-every", type=int, default=0,
+    ap.add_argument("--replan-every", type=int, default=1,
                     help="stages between re-optimisations (0: every 5 %% of the stages)")
     ap.add_argument("--substeps", type=int, default=2, help="simulation steps per stage")
     ap.add_argument("--final-stages", type=int, default=2,
@@ -265,6 +309,11 @@ def main(argv=None) -> int:
     ap.add_argument("--final-min-step", type=float, default=1 / 64,
                     help="shortest final step (fraction of a stage): the remaining time is "
                          "halved at each re-optimisation down to it")
+    ap.add_argument("--trigger-km", type=float, default=5.0,
+                    help="also re-optimise when the estimate drifts this far from the loop's "
+                         "prediction (0: off)")
+    ap.add_argument("--trigger-cm-s", type=float, default=5.0,
+                    help="also re-optimise when the estimated velocity drifts this far (0: off)")
     ap.add_argument("--time-budget", type=float, default=60.0)
     ap.add_argument("--no-errors", action="store_true", help="perfect navigation and execution")
     ap.add_argument("--plot", default="out/gnc_demo.png", help="PNG of flown vs planned")
@@ -285,13 +334,18 @@ def main(argv=None) -> int:
             pl, _ = nominal_planner(args.case, args.time_budget)
             sim = TruthSim(args.case, errors, seed=seed, t0_s=T0_S)
             r = fly(DirectLink(pl), sim, pl, args.replan_every, args.substeps, args.final_stages,
-                    args.final_substeps, args.final_min_step)
+                    args.final_substeps, args.final_min_step, **_triggers(args))
             runs.append(r)
             print(f"run {i + 1:3d} seed {seed}: miss {r['miss_km']:.3f} km {r['miss_cm_s']:.2f} cm/s"
-                  f", final mass {r['final_mass_kg']:.3f} kg, {r['replans']} replans", flush=True)
+                  f", final mass {r['final_mass_kg']:.3f} kg, {r['replans']} replans "
+                  f"({r['triggered']} on drift)", flush=True)
         _print_summary(summarise(runs, m_open, m0))
         return 0
     return _ros_demo(args, planner, errors, m_open, m0)
+
+
+def _triggers(args) -> dict:
+    return {"trigger_pos_m": args.trigger_km * 1e3, "trigger_vel_m_s": args.trigger_cm_s / 100}
 
 
 def _ros_demo(args, planner, errors, m_open, m0) -> int:
@@ -312,7 +366,7 @@ def _ros_demo(args, planner, errors, m_open, m0) -> int:
         sim = TruthSim(args.case, errors, seed=args.seed, t0_s=T0_S)
         r = fly(link, sim, guidance.planner, args.replan_every, args.substeps, args.final_stages,
                 args.final_substeps, args.final_min_step,
-                progress=lambda s: print(s, flush=True))
+                progress=lambda s: print(s, flush=True), **_triggers(args))
     finally:
         guidance.stop()
         for ex in executors:

@@ -20,6 +20,7 @@ from daddy_core.errors import DaddyError
 from daddy_core.problem import problem_from_case
 from daddy_core.problems import load_case
 from daddy_core.solver import Solution, case_options, solve
+from daddy_core.solver.expansion import StageMaps, expand_dynamics
 
 # a first remaining stage shorter than this fraction of a nominal stage is merged into the next
 MIN_STAGE_FRACTION = 0.25
@@ -242,11 +243,12 @@ class GuidancePlanner:
         stage is shortened to end on the plan's stage boundary, or merged into the next when
         shorter than MIN_STAGE_FRACTION of a stage; fewer than MIN_STAGES_LEFT stages are
         re-gridded into that many). Without a plan, the full scenario from x0.
-        Returns (problem, U_guess (K, 3) normalised or None, duals for those stages or None).
+        Returns (problem, U_guess (K, 3) normalised or None, duals for those stages or None,
+        the plan's stage maps for those stages (``StageMaps``) or None).
         """
         base = self.base_problem
         if plan is None:
-            return base.with_x0(x0), None, None
+            return base.with_x0(x0), None, None, None
         tu = self.units.tu_s
         bounds = plan.epoch_s + np.cumsum(plan.stage_dt_s)          # stage end times
         k0 = int(np.searchsorted(bounds, t_s + TIME_TOLERANCE_S, side="right"))
@@ -258,12 +260,16 @@ class GuidancePlanner:
         lam = np.asarray(plan.solution.duals.get("lam", []), float)
         lam = lam[:, k0:] if lam.ndim == 2 and lam.shape[1] == len(plan.stage_dt_s) else None
         nominal = float(np.median(plan.stage_dt_s))
+        maps = plan.solution.stage_maps
         if first < MIN_STAGE_FRACTION * nominal and len(dts) > 1:
             dts = dts[1:]
             dts[0] += first
             U = U[1:]
             lam = None if lam is None else lam[:, 1:]
+            maps = None if maps is None else maps.tail(k0 + 1, first_valid=False)
         else:
+            maps = None if maps is None else maps.tail(
+                k0, first_valid=abs(first - dts[0]) <= TIME_TOLERANCE_S)
             dts[0] = first
         if len(dts) < MIN_STAGES_LEFT:
             # near the end, keep enough controls for the terminal constraints (6 of them, 3 per
@@ -274,9 +280,10 @@ class GuidancePlanner:
             idx = np.minimum(np.searchsorted(np.cumsum(dts), mids), len(dts) - 1)
             dts = np.full(MIN_STAGES_LEFT, total / MIN_STAGES_LEFT)
             U = U[idx]
+            maps = None
             lam = None if lam is None else lam[:, idx]
         duals = None if lam is None else {"lam": lam, "lam_t": plan.solution.duals.get("lam_t", [])}
-        return base.with_x0(x0, dts / tu), U, duals
+        return base.with_x0(x0, dts / tu), U, duals, maps
 
     # ------------------------------------------------------------------ re-optimisation
     def replan(self, pos_m, vel_m_s, mass_kg, stamp_s: float, request_id: str = "",
@@ -289,7 +296,8 @@ class GuidancePlanner:
         """
         x0 = self.check_state(pos_m, vel_m_s, mass_kg, stamp_s, now_s)
         current = self.plan
-        problem, U_guess, duals = self.shifted_problem(None if cold else current, stamp_s, x0)
+        problem, U_guess, duals, maps = self.shifted_problem(None if cold else current,
+                                                             stamp_s, x0)
         warm = U_guess is not None
         if U_guess is None:
             U_guess = np.full((problem.N, 3), float(self.units.thrust(1e-6)))
@@ -305,7 +313,7 @@ class GuidancePlanner:
         try:
             sol = solve(problem, U_guess, method=self.method, fuel_optimal=None, polish=self.polish,
                         options=opts, case_name=self.case.name, duals=duals,
-                        rho=current.solution.rho if warm else None)
+                        rho=current.solution.rho if warm else None, maps=maps)
             safe, feasible, why, X, miss = self._assess(sol, problem)
             if not safe and self.polish:
                 # polishing an infeasible problem can push the thrust past its bound: fall back
@@ -421,7 +429,17 @@ class GuidancePlanner:
         return self._adopt_solution(sol, epoch_s, "nominal")
 
     def _adopt_solution(self, sol: Solution, epoch_s: float, request_id: str) -> Plan:
-        """Make a stored solution (stages starting at epoch_s) the current plan."""
+        """Make a stored solution (stages starting at epoch_s) the current plan, with its stage
+        maps expanded now (one batched call) so that the first re-optimisation from it is as
+        fast as the later ones."""
+        if sol.stage_maps is None:
+            try:
+                problem = self.base_problem.with_x0(sol.X[0], sol.stage_dt)
+                sol.stage_maps = StageMaps.of(expand_dynamics(problem, sol.X[:-1], sol.U,
+                                                              sol.stage_dt),
+                                              sol.X, sol.U, self.replan_options.eps_da)
+            except (DaddyError, ValueError, FloatingPointError):
+                sol.stage_maps = None   # re-optimisations then roll out and expand afresh
         plan = Plan(epoch_s, sol.stage_dt * self.units.tu_s, sol.U_newton.copy(),
                     self.states_to_si(sol.X), sol, request_id, 0.0, False, sol.max_violation)
         self.set_plan(plan)

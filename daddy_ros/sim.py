@@ -70,6 +70,11 @@ class TruthSim:
         self.t_s += dt_s
         return u
 
+    def propagate(self, x: np.ndarray, thrust_n: np.ndarray, dt_s: float) -> np.ndarray:
+        """The true dynamics without errors: normalised state x after dt_s under thrust_n [N]."""
+        return rk78(self.rhs, x, self.units.thrust(np.asarray(thrust_n, float)), 0.0,
+                    float(self.units.time(dt_s)), tol=1e-12)
+
     def miss(self):
         """(position miss m, velocity miss m/s) with respect to the case target."""
         u = self.units

@@ -6,7 +6,8 @@ import numpy as np
 import pytest
 
 from daddy_core.errors import DaddyError
-from daddy_ros.demo import PLANS_DIR, T0_S, flight_steps
+from daddy_ros.demo import PLANS_DIR, T0_S, DeviationMonitor, flight_steps
+from daddy_ros.sim import Errors, TruthSim
 from daddy_ros.planner import MIN_STAGE_FRACTION, MIN_STAGES_LEFT, GuidancePlanner, InputRejected
 
 
@@ -24,18 +25,25 @@ def test_shift_drops_executed_stages_and_keeps_time_to_go(planner):
     tu = planner.units.tu_s
     # 2.5 stages flown: two stages dropped, the current (third) one shortened
     t = plan.epoch_s + dt[0] + dt[1] + 0.5 * dt[2]
-    prob, U, duals = planner.shifted_problem(plan, t, x0)
+    prob, U, duals, maps = planner.shifted_problem(plan, t, x0)
     assert prob.N == len(dt) - 2
     assert prob.stage_dt[0] * tu == pytest.approx(0.5 * dt[2])
     assert np.sum(prob.stage_dt) * tu == pytest.approx(plan.end_s - t)
     np.testing.assert_array_equal(U, plan.solution.U[2:])
     assert duals["lam"].shape[1] == prob.N
+    # the plan's stage maps (expanded when it was loaded) come along; the shortened first
+    # stage's map is not used
+    assert maps.N == prob.N and maps.radius[0] == 0
+    np.testing.assert_array_equal(maps.radius[1:], plan.solution.stage_maps.radius[3:])
+    _, _, _, at_boundary = planner.shifted_problem(plan, plan.epoch_s + dt[0] + dt[1], x0)
+    assert at_boundary.N == len(dt) - 2 and at_boundary.radius[0] > 0
     # a first stage shorter than MIN_STAGE_FRACTION is merged into the next one
     t = plan.epoch_s + dt[0] - 0.5 * MIN_STAGE_FRACTION * dt[1]
-    prob, U, _ = planner.shifted_problem(plan, t, x0)
+    prob, U, _, maps = planner.shifted_problem(plan, t, x0)
     assert prob.N == len(dt) - 1
     assert prob.stage_dt[0] * tu == pytest.approx(dt[1] + 0.5 * MIN_STAGE_FRACTION * dt[1])
     np.testing.assert_array_equal(U, plan.solution.U[1:])   # the merged stage flies stage 1's
+    assert maps.N == prob.N and maps.radius[0] == 0
     with pytest.raises(InputRejected, match="ended"):
         planner.shifted_problem(plan, plan.end_s + 1.0, x0)
 
@@ -47,16 +55,37 @@ def test_shift_regrids_the_last_stages(planner):
     tu = planner.units.tu_s
     # half of the last stage left: re-gridded into MIN_STAGES_LEFT equal stages flying its thrust
     t = plan.end_s - 0.5 * dt[-1]
-    prob, U, duals = planner.shifted_problem(plan, t, x0)
+    prob, U, duals, maps = planner.shifted_problem(plan, t, x0)
     assert prob.N == MIN_STAGES_LEFT
     np.testing.assert_allclose(prob.stage_dt * tu, np.full(MIN_STAGES_LEFT, 0.5 * dt[-1] / MIN_STAGES_LEFT))
     np.testing.assert_array_equal(U, np.tile(plan.solution.U[-1], (MIN_STAGES_LEFT, 1)))
+    assert maps is None   # a new grid: no maps
     assert duals["lam"].shape[1] == MIN_STAGES_LEFT
     # two stages left: each new stage takes the control of the old stage holding its midpoint
     t = plan.end_s - dt[-2] - dt[-1]
-    prob, U, _ = planner.shifted_problem(plan, t, x0)
+    prob, U, _, maps = planner.shifted_problem(plan, t, x0)
     assert np.sum(prob.stage_dt) * tu == pytest.approx(dt[-2] + dt[-1])
     np.testing.assert_array_equal(U, plan.solution.U[[-2, -2, -1, -1]])
+
+
+def test_deviation_monitor_follows_the_truth_and_flags_drift():
+    sim = TruthSim("earth_mars", Errors(0, 0, 0, 0), t0_s=T0_S)
+    mon = DeviationMonitor(sim, max_pos_m=2e3, max_vel_m_s=1e-2)
+    assert not mon.due(*sim.truth_si()[:2])          # no prediction yet: nothing is due
+    mon.reset(*sim.truth_si())
+    thrust = np.array([0.1, -0.2, 0.05])
+    for _ in range(3):                                 # without errors it predicts the truth
+        sim.apply(thrust, 86400.0)
+        mon.advance(thrust, 86400.0)
+    pos, vel, _ = sim.truth_si()
+    dr, dv = mon.drift(pos, vel)
+    assert dr < 1.0 and dv < 1e-6
+    assert not mon.due(pos, vel)
+    assert mon.due(pos + [3e3, 0, 0], vel)             # drifted by more than 2 km
+    assert mon.due(pos, vel + [0, 0, 0.02])            # or by more than 1 cm/s
+    off = DeviationMonitor(sim, 0.0, 0.0)
+    off.reset(pos, vel, 900.0)
+    assert not off.due(pos + 1e9, vel + 1e3)                 # both tests off
 
 
 def test_flight_steps_cover_the_transfer_and_shrink_to_the_end():

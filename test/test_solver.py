@@ -109,6 +109,38 @@ def test_solution_round_trips_and_warm_starts(tmp_path):
     assert warm.cost == pytest.approx(sol.cost, rel=1e-9)
 
 
+def test_stage_maps_roll_out_and_restore_like_integration():
+    # the Earth-Mars nominal plan's stage maps: a Dyn rollout (polynomials inside their radius)
+    # follows the integrated one, and a Newton restoration from a perturbed start that
+    # re-centres them ends as feasible as one that expands afresh
+    from daddy_core.solver.expansion import StageMaps, expand_dynamics
+    from daddy_core.solver.newton import polish
+    case = load_case("earth_mars")
+    prob = problem_from_case(case)
+    plan = Solution.from_json(pathlib.Path(__file__).parents[1] / "daddy_ros/plans/earth_mars_fuel.json")
+    opts = case_options(case, True)
+    maps = StageMaps.of(expand_dynamics(prob, plan.X[:-1], plan.U, prob.stage_dt), plan.X, plan.U,
+                        opts.eps_da)
+    assert maps.N == prob.N and np.all(maps.radius > 0)
+    X_int = prob.rollout(plan.U)
+    X_dyn, served = maps.rollout(prob, plan.U)
+    assert served == prob.N
+    np.testing.assert_allclose(X_dyn, X_int, atol=1e-10)     # at the expansion point: exact
+    U = plan.U * (1 + 1e-4)
+    X_int, (X_dyn, served) = prob.rollout(U), maps.rollout(prob, U)
+    assert served > prob.N // 2
+    assert np.max(np.abs(X_dyn - X_int)) < 1e-4                # within eps_da per stage
+    tail = maps.tail(3, first_valid=False)
+    assert tail.N == prob.N - 3 and tail.radius[0] == 0 and tail.radius[1] == maps.radius[4]
+    moved = prob.with_x0(plan.X[0] + np.r_[1e-6, -1e-6, 0, 0, 0, 0, 0])
+    X0 = prob.rollout(plan.U, x0=moved.x0)
+    fresh = polish(moved, X0, plan.U, opts)
+    reused = polish(moved, X0, plan.U, opts, maps=maps)
+    assert fresh.converged and reused.converged
+    assert reused.max_violation <= opts.tol_newton
+    assert isinstance(reused.maps, StageMaps)
+
+
 def test_feedback_gains_shape():
     sol = solve_case("double_integrator")
     assert sol.gains_a.shape == (11, 3) and sol.gains_b.shape == (11, 3, 6)

@@ -147,6 +147,71 @@ def maps_at(problem, F, dz: np.ndarray, inside: np.ndarray, X: np.ndarray, U: np
     return da.DA(c, F.T)
 
 
+@dataclass
+class StageMaps:
+    """Order-2 stage maps kept with the point they were expanded at, so that a nearby
+    trajectory can use them (paper eq. 11): a Dyn rollout, or re-centring instead of expanding.
+
+    Attributes:
+        F: DA (nx, N) maps of the stages in z = [dx, du].
+        X: (N, nx) stage start states and U: (N, nu) controls of the expansion point.
+        radius: (N,) convergence radius of each map; 0 for a map that must not be used (e.g.
+            a stage whose duration has changed).
+    """
+
+    F: da.DA
+    X: np.ndarray
+    U: np.ndarray
+    radius: np.ndarray
+
+    @classmethod
+    def of(cls, F, X: np.ndarray, U: np.ndarray, eps_da: float) -> "StageMaps":
+        """Maps F at (X[k], U[k]) (X may carry the final state as an extra row)."""
+        N = U.shape[0]
+        return cls(F, np.asarray(X, float)[:N].copy(), np.asarray(U, float).copy(),
+                   da.radius(F, eps_da))
+
+    @property
+    def N(self) -> int:
+        return self.U.shape[0]
+
+    def deviation(self, X: np.ndarray, U: np.ndarray):
+        """dz (n, N) of the stages (X[k], U[k]) from the expansion point, and (N,) whether each
+        lies inside its map's radius."""
+        dz = np.concatenate([(X[:self.N] - self.X).T, (U - self.U).T])
+        return dz, np.sqrt(np.sum(dz * dz, axis=0)) < self.radius
+
+    def at(self, problem, X: np.ndarray, U: np.ndarray):
+        """DA (nx, N) maps at (X[k], U[k]): re-centred inside the radius, expanded elsewhere."""
+        dz, inside = self.deviation(X, U)
+        return maps_at(problem, self.F, dz, inside, X, U)
+
+    def rollout(self, problem, U: np.ndarray) -> tuple[np.ndarray, int]:
+        """Propagate U (N, nu) from problem.x0, evaluating a stage's map where the stage lies
+        inside its radius and integrating it otherwise (the Dyn forward pass, Alg. 8, with no
+        feedback). Returns X (N+1, nx) and the number of stages served by a polynomial."""
+        N = problem.N
+        X = np.empty((N + 1, problem.nx))
+        X[0] = problem.x0
+        served = 0
+        for k in range(N):
+            dz = np.concatenate([X[k] - self.X[k], U[k] - self.U[k]])
+            if np.sqrt(dz @ dz) < self.radius[k]:
+                X[k + 1] = da.evaluate(self.F[:, k], dz)
+                served += 1
+            else:
+                X[k + 1] = problem.stage_flow(X[k], U[k], k)
+        return X, served
+
+    def tail(self, k0: int, first_valid: bool) -> "StageMaps":
+        """The maps of stages k0.. (a shifted plan); the first one is unusable unless
+        ``first_valid`` (its stage kept its duration)."""
+        r = self.radius[k0:].copy()
+        if not first_valid:
+            r[0] = 0.0
+        return StageMaps(self.F[:, k0:], self.X[k0:], self.U[k0:], r)
+
+
 def augmented_stage_cost(problem, x, u, mult: Multipliers, hom):
     """l~ (eq. 8) of every stage, (N,): floats or DA alike."""
     lt = problem.stage_cost(x, u, problem.stage_dt, hom)

@@ -22,7 +22,7 @@ from scipy.linalg import LinAlgError, cho_solve_banded, cholesky_banded
 
 from .. import da
 from ..errors import DaddyError
-from .expansion import expand_dynamics, maps_at, total_violation
+from .expansion import StageMaps, expand_dynamics, total_violation
 
 
 @dataclass
@@ -34,7 +34,7 @@ class PolishResult:
     improved: bool
     iterations: int
     reason: str
-    maps: tuple | None = None  # (F, Xc, Uc): the last model's stage maps and their centre
+    maps: StageMaps | None = None  # the last model's stage maps
 
 
 def _active(g0: np.ndarray, n_ineq: int, active_tol: float) -> np.ndarray:
@@ -188,37 +188,30 @@ def _float_residual(problem, X, U, active_tol: float):
     return fx, float(np.max(np.concatenate(vals)))
 
 
-def stage_maps(problem, maps, X, U, eps_da: float, fx=None):
-    """Order-2 stage maps at (X[:-1], U), with the exact float flows ``fx`` as values if given.
+def _stage_maps(problem, maps: StageMaps | None, X, U, fx):
+    """Order-2 stage maps at (X[:-1], U) whose values are the exact float flows ``fx``.
 
-    ``maps`` = (F, Xc, Uc): maps of a nearby nominal (the DDP's last, or the previous Newton
-    iterate's). Stages whose deviation lies inside F's convergence radius at ``eps_da`` are
-    re-centred by composition, the rest re-expanded (``maps_at``); ``maps`` None: expand all.
-    With ``fx``, the constant part is replaced by it, so a model's residual at Y is exact and
-    only its derivatives carry the re-centring's truncation error.
+    ``maps``: maps of a nearby trajectory (the previous outer iteration's, or given to
+    ``polish``): re-centred where the stage lies inside their radius, re-expanded elsewhere;
+    None: expand every stage. The constant part is then replaced by ``fx``, so the model's
+    residual at Y is exact and only its derivatives carry the re-centring's truncation error.
     """
-    if maps is None:
-        F = expand_dynamics(problem, X[:-1], U, problem.stage_dt)
-    else:
-        F0, Xc, Uc = maps
-        dz = np.concatenate([(X[:-1] - Xc[:-1]).T, (U - Uc).T])                # (n, N)
-        inside = np.sqrt(np.sum(dz * dz, axis=0)) < da.radius(F0, eps_da)
-        F = maps_at(problem, F0, dz, inside, X, U)
-    if fx is None:
-        return F
+    F = expand_dynamics(problem, X[:-1], U, problem.stage_dt) if maps is None \
+        else maps.at(problem, X, U)
     c = F.c.copy()
     c[0] = fx
     return da.DA(c, F.T)
 
 
-def polish(problem, X, U, opts, deadline: float | None = None, maps=None) -> PolishResult:
+def polish(problem, X, U, opts, deadline: float | None = None,
+           maps: StageMaps | None = None) -> PolishResult:
     """Alg. 11 from (X, U) to max active-constraint violation <= opts.tol_newton.
 
     The constraint values Gamma(Y) are always exact (one batched float integration of every
     stage per outer iteration). The stage maps that give their derivatives are re-centred from
-    the previous outer iteration's -- first from ``maps`` = (F, Xc, Uc), e.g. the DDP's last
-    stage maps -- where the step stayed inside their convergence radius (paper eq. 11, as in the
-    Dyn forward pass) and re-expanded elsewhere. Newton on these derivatives converges at a rate
+    the previous outer iteration's -- first from ``maps``, e.g. a previous plan's -- where the
+    step stayed inside their convergence radius (paper eq. 11, as in the Dyn forward pass) and
+    re-expanded elsewhere. Newton on these derivatives converges at a rate
     set by their truncation error; an outer iteration that does not reduce the exact residual
     makes the next one expand every stage afresh.
     """
@@ -249,7 +242,7 @@ def polish(problem, X, U, opts, deadline: float | None = None, maps=None) -> Pol
         prev_dmax = dmax
         fresh = maps is None
         model = _Model(problem, X, U, opts.newton_active_tol,
-                       F=stage_maps(problem, maps, X, U, opts.eps_da, fx))
+                       F=_stage_maps(problem, maps, X, U, fx))
         d = model.residual()
         try:
             sigma = _BandedSigma(model.D, opts.newton_regularisation)
@@ -288,7 +281,7 @@ def polish(problem, X, U, opts, deadline: float | None = None, maps=None) -> Pol
                 continue
             reason = "no descent on the constraint model"
             break
-        maps = (model.F, X, U)
+        maps = StageMaps.of(model.F, X, U, opts.eps_da)
         X, U = model.apply(dY)
     if best is None:
         return PolishResult(X0, U0, np.inf, False, False, it, reason, maps)

@@ -1,8 +1,9 @@
 """The result of a solve: trajectory, gains, figures of merit; JSON/NPZ round trip; warm start."""
 from __future__ import annotations
 
+import copy
 import json
-from dataclasses import asdict, dataclass, field
+from dataclasses import dataclass, field, fields
 from pathlib import Path
 
 import numpy as np
@@ -27,6 +28,8 @@ class Solution:
             rtol = atol = 1e-12 (normalised, over the terminal-constraint components).
         iterations: {homotopy, aul, ddp, newton}; runtime_s: {total, ddp, newton, ...}.
         history: per-homotopy-step summaries; units: {lu_km, tu_s, mu_kg, thrust_unit_n}.
+        stage_maps: the last stage maps (``StageMaps``), in memory only (not in JSON/NPZ): a
+            warm start from this solution rolls out and restores with them.
     """
 
     case: str
@@ -51,6 +54,7 @@ class Solution:
     polynomial_share: float = 0.0
     duals: dict = field(default_factory=dict)  # {"lam": (n_c, N), "lam_t": (n_t,)} as lists
     rho: float = 0.0  # Quu regularisation at the end of the last DDP solve (warm starts resume it)
+    stage_maps: object = field(default=None, repr=False, compare=False)
 
     _ARRAYS = ("X", "U", "stage_dt", "gains_a", "gains_b")
 
@@ -76,7 +80,8 @@ class Solution:
         return X
 
     def to_dict(self) -> dict:
-        d = {k: v for k, v in asdict(self).items() if k not in self._ARRAYS}
+        d = {f.name: copy.deepcopy(getattr(self, f.name)) for f in fields(self)
+             if f.name not in self._ARRAYS + ("stage_maps",)}
         for k in self._ARRAYS:
             d[k] = np.asarray(getattr(self, k)).tolist()
         if self.units.get("thrust_unit_n"):

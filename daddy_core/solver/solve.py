@@ -10,8 +10,8 @@ from scipy.integrate import solve_ivp
 from ..errors import DaddyError
 from .aul import aul
 from .ddp import DDPStats
-from .expansion import Multipliers, total_violation
-from .newton import polish as newton_polish, stage_maps
+from .expansion import Multipliers, StageMaps, total_violation
+from .newton import polish as newton_polish
 from .options import SolverOptions, parse_method
 from .solution import Solution
 
@@ -89,7 +89,8 @@ def objective(problem, X, U, hom) -> float:
 
 def solve(problem, u_guess=None, method: str = "dyn", fuel_optimal: bool | None = None,
           polish: bool = True, options: SolverOptions | None = None, case_name: str | None = None,
-          progress=None, duals: dict | None = None, rho: float | None = None) -> Solution:
+          progress=None, duals: dict | None = None, rho: float | None = None,
+          maps: StageMaps | None = None) -> Solution:
     """Solve ``problem`` with DADDy.
 
     Args:
@@ -105,6 +106,10 @@ def solve(problem, u_guess=None, method: str = "dyn", fuel_optimal: bool | None 
             Solution given as ``u_guess``, when their shapes fit).
         rho: warm-start Quu regularisation (default: that of a Solution given as ``u_guess``
             when ``options.carry_rho``, else ``options.rho_init``).
+        maps: stage maps of a nearby trajectory with this problem's stages (default: those of
+            a Solution given as ``u_guess`` when its stage durations are this problem's). The
+            initial rollout then evaluates them where a stage lies inside their radius (Alg. 8)
+            and the Newton restoration re-centres them instead of expanding.
     Returns:
         a ``Solution``. A solve that fails returns ``converged=False`` with the reason and the
         best feasible-so-far iterate (never NaN).
@@ -113,6 +118,8 @@ def solve(problem, u_guess=None, method: str = "dyn", fuel_optimal: bool | None 
     sweep, dyn = parse_method(method)
     if isinstance(u_guess, Solution):
         duals = duals if duals is not None else u_guess.duals
+        if maps is None and np.array_equal(u_guess.stage_dt, problem.stage_dt):
+            maps = u_guess.stage_maps
         if rho is None and opts.carry_rho:
             rho = u_guess.rho
         u_guess = u_guess.U
@@ -127,23 +134,26 @@ def solve(problem, u_guess=None, method: str = "dyn", fuel_optimal: bool | None 
     t_start = time.perf_counter()
     deadline = None if opts.time_budget_s is None else t_start + opts.time_budget_s
     stats = DDPStats()
-    X = problem.rollout(U0)
+    if maps is not None and maps.N != problem.N:
+        raise DaddyError(f"maps cover {maps.N} stages, the problem has {problem.N}")
+    X = problem.rollout(U0) if maps is None else maps.rollout(problem, U0)[0]
     t_rollout = time.perf_counter() - t_start
     if not np.all(np.isfinite(X)):
         raise DaddyError("the initial guess propagates to a non-finite state")
     U = U0
-    restored, restore_iters, F0 = None, 0, None
+    restored, restore_iters, F0, final_maps = None, 0, None, None
     t0 = time.perf_counter()
     if opts.restore_warm_start:
         # a feasible iterate first (Newton, Alg. 11), so that a solve stopped by its time budget
         # still returns a trajectory that meets every constraint
-        pres = newton_polish(problem, X, U, opts, deadline)
+        pres = newton_polish(problem, X, U, opts, deadline, maps=maps)
         restore_iters = pres.iterations
         if pres.converged:
             X, U = pres.X, pres.U
             restored = (X, U)
+            final_maps = pres.maps
             if pres.maps is not None:   # the DDP starts from the Newton model's maps, re-centred
-                F0 = stage_maps(problem, pres.maps, X, U, opts.eps_da)
+                F0 = pres.maps.at(problem, X, U)
         if progress:
             progress(f"warm start restored by Newton: {pres.iterations} iterations, max violation"
                      f" {pres.max_violation:.2e} ({pres.reason})")
@@ -188,6 +198,8 @@ def solve(problem, u_guess=None, method: str = "dyn", fuel_optimal: bool | None 
                 break
     t_ddp = time.perf_counter() - t_aul
     X, U = best
+    if st is not None and np.array_equal(st.X, X):
+        final_maps = StageMaps.of(st.F, st.X, st.U, opts.eps_da)
     fallback = restored is not None and not converged
     if fallback:  # DDP did not finish: return the feasible, Newton-restored warm start
         X, U = restored
@@ -205,6 +217,7 @@ def solve(problem, u_guess=None, method: str = "dyn", fuel_optimal: bool | None 
                      f" ({pres.reason})")
         if pres.improved:
             X, U = pres.X, pres.U
+            final_maps = pres.maps or final_maps
         if not pres.converged:
             converged = False
             reason = f"newton polishing: {pres.reason}"
@@ -238,6 +251,6 @@ def solve(problem, u_guess=None, method: str = "dyn", fuel_optimal: bool | None 
                "mu_kg": units.mu_kg, "thrust_unit_n": units.thrust_unit_n},
         polynomial_share=stats.polynomial_share,
         duals={"lam": mult.lam.tolist(), "lam_t": mult.lam_t.tolist()},
-        rho=float(rho_last),
+        rho=float(rho_last), stage_maps=final_maps,
     )
     return sol
