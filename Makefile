@@ -46,7 +46,7 @@ test-slow: $(STAMP)
 	$(PY) -m pytest -q -m slow test --run-slow
 
 monte-carlo: $(STAMP)
-	$(VENV)/bin/gnc_demo --case $(DEMO_CASE) --runs $(or $(RUNS),100)
+	OPENBLAS_NUM_THREADS=1 OMP_NUM_THREADS=1 $(VENV)/bin/gnc_demo --case $(DEMO_CASE) --runs $(or $(RUNS),100)
 
 reliability: $(STAMP)
 	$(VENV)/bin/daddy_reliability $(if $(QUICK),--quick)

@@ -11,6 +11,7 @@ the number of re-optimisations and their latency.
 from __future__ import annotations
 
 import argparse
+import concurrent.futures
 import os
 import statistics
 import threading
@@ -261,9 +262,11 @@ def fly(link, sim: TruthSim, planner: GuidancePlanner, replan_every: int, subste
             "levels": levels, "flown_m": np.array(flown)}
 
 
-def nominal_planner(case: str, time_budget_s: float) -> tuple[GuidancePlanner, float]:
+def nominal_planner(case: str, time_budget_s: float,
+                    arrival_tolerance_m: float = 0.0) -> tuple[GuidancePlanner, float]:
     """A planner holding the open-loop optimum at T0 (bundled plan or a cold solve)."""
-    planner = GuidancePlanner(case, time_budget_s=time_budget_s)
+    planner = GuidancePlanner(case, time_budget_s=time_budget_s,
+                              arrival_tolerance_m=arrival_tolerance_m)
     plan_file = PLANS_DIR / f"{case}_fuel.json"
     sim = TruthSim(case, t0_s=T0_S)
     if plan_file.exists():
@@ -299,6 +302,8 @@ def main(argv=None) -> int:
     ap.add_argument("--case", default="halo_l2_l1", choices=["halo_l2_l1", "earth_mars", "dro_dro"])
     ap.add_argument("--runs", type=int, default=0, help="Monte Carlo runs without the ROS graph")
     ap.add_argument("--seed", type=int, default=1)
+    ap.add_argument("--jobs", type=int, default=os.cpu_count() or 1,
+                    help="Monte Carlo runs in parallel worker processes (default: one per core)")
     ap.add_argument("--replan-every", type=int, default=1,
                     help="stages between re-optimisations (0: every 5 %% of the stages)")
     ap.add_argument("--substeps", type=int, default=2, help="simulation steps per stage")
@@ -306,7 +311,7 @@ def main(argv=None) -> int:
                     help="re-optimise at every sub-step of the last stages")
     ap.add_argument("--final-substeps", type=int, default=8,
                     help="simulation steps (and re-optimisations) per stage in the last stages")
-    ap.add_argument("--final-min-step", type=float, default=1 / 64,
+    ap.add_argument("--final-min-step", type=float, default=1 / 256,
                     help="shortest final step (fraction of a stage): the remaining time is "
                          "halved at each re-optimisation down to it")
     ap.add_argument("--trigger-km", type=float, default=5.0,
@@ -314,6 +319,9 @@ def main(argv=None) -> int:
                          "prediction (0: off)")
     ap.add_argument("--trigger-cm-s", type=float, default=5.0,
                     help="also re-optimise when the estimated velocity drifts this far (0: off)")
+    ap.add_argument("--arrival-tolerance-km", type=float, default=0.3,
+                    help="in the arrival phase the guidance targets the velocity exactly and the "
+                         "position within this distance (node parameter arrival_tolerance_m)")
     ap.add_argument("--time-budget", type=float, default=60.0)
     ap.add_argument("--no-errors", action="store_true", help="perfect navigation and execution")
     ap.add_argument("--plot", default="out/gnc_demo.png", help="PNG of flown vs planned")
@@ -323,25 +331,34 @@ def main(argv=None) -> int:
     print(f"closed-loop GNC demo: {args.case}, navigation errors {errors.nav_pos_m} m / "
           f"{errors.nav_vel_m_s * 1e3} mm/s, execution errors {errors.exec_mag:.0%} / "
           f"{errors.exec_point_deg} deg (1 sigma)", flush=True)
-    planner, m_open = nominal_planner(args.case, args.time_budget)
+    planner, m_open = nominal_planner(args.case, args.time_budget, args.arrival_tolerance_km * 1e3)
     args.replan_every = args.replan_every or max(1, planner.base_problem.N // 20)
     m0 = planner.case.spacecraft.wet_mass_kg
     print(f"open-loop optimum: final mass {m_open:.3f} kg", flush=True)
     if args.runs:
         runs = []
-        for i in range(args.runs):
-            seed = args.seed + i
-            pl, _ = nominal_planner(args.case, args.time_budget)
-            sim = TruthSim(args.case, errors, seed=seed, t0_s=T0_S)
-            r = fly(DirectLink(pl), sim, pl, args.replan_every, args.substeps, args.final_stages,
-                    args.final_substeps, args.final_min_step, **_triggers(args))
-            runs.append(r)
-            print(f"run {i + 1:3d} seed {seed}: miss {r['miss_km']:.3f} km {r['miss_cm_s']:.2f} cm/s"
-                  f", final mass {r['final_mass_kg']:.3f} kg, {r['replans']} replans "
-                  f"({r['triggered']} on drift)", flush=True)
+        seeds = [args.seed + i for i in range(args.runs)]
+        jobs = max(1, min(args.jobs, args.runs))
+        with concurrent.futures.ProcessPoolExecutor(jobs) as pool:
+            for i, r in enumerate(pool.map(_monte_carlo_run, [(args, errors, s) for s in seeds])):
+                runs.append(r)
+                print(f"run {i + 1:3d} seed {seeds[i]}: miss {r['miss_km']:.3f} km "
+                      f"{r['miss_cm_s']:.2f} cm/s, final mass {r['final_mass_kg']:.3f} kg, "
+                      f"{r['replans']} replans ({r['triggered']} on drift)", flush=True)
         _print_summary(summarise(runs, m_open, m0))
         return 0
     return _ros_demo(args, planner, errors, m_open, m0)
+
+
+def _monte_carlo_run(job) -> dict:
+    """One closed-loop run without the ROS graph (a worker process of the Monte Carlo)."""
+    args, errors, seed = job
+    pl, _ = nominal_planner(args.case, args.time_budget, args.arrival_tolerance_km * 1e3)
+    sim = TruthSim(args.case, errors, seed=seed, t0_s=T0_S)
+    r = fly(DirectLink(pl), sim, pl, args.replan_every, args.substeps, args.final_stages,
+            args.final_substeps, args.final_min_step, **_triggers(args))
+    r.pop("flown_m")
+    return r
 
 
 def _triggers(args) -> dict:
@@ -354,7 +371,8 @@ def _ros_demo(args, planner, errors, m_open, m0) -> int:
 
     from .guidance_node import GuidanceNode, spin_in_thread
     rclpy.init(signal_handler_options=SignalHandlerOptions.NO)
-    guidance = GuidanceNode(scenario=args.case, time_budget_s=args.time_budget)
+    guidance = GuidanceNode(scenario=args.case, time_budget_s=args.time_budget,
+                            arrival_tolerance_m=args.arrival_tolerance_km * 1e3)
     guidance.adopt_plan(planner.plan)            # the nominal plan, anchored at T0
     link = RosLink(guidance.frame_id, timeout_s=3 * args.time_budget + 30)
     # one single-threaded executor per node (rclpy's multi-threaded one busy-polls)

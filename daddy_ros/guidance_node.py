@@ -54,6 +54,9 @@ PARAMETERS = {  # name: (default, description)
     "time_budget_s": (60.0, "wall-clock budget of one re-optimisation [s]"),
     "restore_first": (True, "restore feasibility of the warm start by Newton before DDP, so a "
                             "re-optimisation stopped by its budget still yields a feasible plan"),
+    "arrival_tolerance_m": (0.0, "in the arrival phase (the last re-gridded stages) the terminal "
+                                 "position may be this far from the target, the velocity stays "
+                                 "exact [m]; 0: position exact too"),
     "staleness_s": (600.0, "estimates older than this relative to the request are rejected [s]"),
     "frame_id": ("earth_moon_rotating", "frame of state estimates and thrust"),
     "plan_file": ("", "nominal plan (solution JSON) adopted at the first estimate; empty: the "
@@ -90,7 +93,8 @@ class GuidanceNode(Node):
             scenario=g("scenario"), method=g("method"), polish=g("polish"),
             fuel_optimal=g("fuel_optimal"), stages=g("stages"), time_budget_s=g("time_budget_s"),
             staleness_s=g("staleness_s"), tol_aul=g("tol_aul") or None,
-            tol_newton=g("tol_newton") or None, restore_first=g("restore_first"))
+            tol_newton=g("tol_newton") or None, restore_first=g("restore_first"),
+            arrival_tolerance_m=g("arrival_tolerance_m"))
         self.plan_file = g("plan_file") or self._bundled_plan()
         self._lock = threading.Lock()
         self._wake = threading.Condition(self._lock)

@@ -20,10 +20,12 @@ from daddy_core.errors import DaddyError
 from daddy_core.problem import problem_from_case
 from daddy_core.problems import load_case
 from daddy_core.solver import Solution, case_options, solve
-from daddy_core.solver.expansion import StageMaps, expand_dynamics
+from daddy_core.da import functions as dm
+from daddy_core.solver.expansion import StageMaps, expand_dynamics, max_violation
 
 # a first remaining stage shorter than this fraction of a nominal stage is merged into the next
 MIN_STAGE_FRACTION = 0.25
+ARRIVAL_SPEED_SCALE_M_S = 0.01  # a position one arrival tolerance off weighs as 1 cm/s (_arrival)
 MIN_STAGES_LEFT = 4  # a re-plan keeps at least this many stages to the end (re-gridded)
 # clock comparisons: times closer than this to a stage boundary count as on it [s]
 TIME_TOLERANCE_S = 1e-6
@@ -102,12 +104,17 @@ class GuidancePlanner:
                  fuel_optimal: bool = True, stages: int = 0, time_budget_s: float = 60.0,
                  staleness_s: float = 600.0, tol_aul: float | None = None,
                  tol_newton: float | None = None, mass_tolerance_kg: float = 1e-6,
-                 thrust_margin: float = 0.05, restore_first: bool = True):
+                 thrust_margin: float = 0.05, restore_first: bool = True,
+                 arrival_tolerance_m: float = 0.0):
         self.case = load_case(scenario)
         if self.case.spacecraft is None:
             raise DaddyError(f"scenario {scenario!r} has no spacecraft (mass) model for guidance")
         self.method = method
         self.polish = bool(polish)
+        if not (math.isfinite(arrival_tolerance_m) and arrival_tolerance_m >= 0.0):
+            raise DaddyError(f"arrival_tolerance_m must be a finite number >= 0, got "
+                             f"{arrival_tolerance_m!r}")
+        self.arrival_tolerance_m = float(arrival_tolerance_m)
         self.fuel_optimal = bool(fuel_optimal)
         self.units = self.case.units
         if not 0.0 <= thrust_margin < 1.0:
@@ -242,7 +249,9 @@ class GuidancePlanner:
         Drops the stages already executed, keeps the remaining time to go (the first remaining
         stage is shortened to end on the plan's stage boundary, or merged into the next when
         shorter than MIN_STAGE_FRACTION of a stage; fewer than MIN_STAGES_LEFT stages are
-        re-gridded into that many). Without a plan, the full scenario from x0.
+        re-gridded into that many: the arrival phase, whose terminal position may keep
+        ``arrival_tolerance_m`` from the target, see ``_arrival``). Without a plan, the full
+        scenario from x0.
         Returns (problem, U_guess (K, 3) normalised or None, duals for those stages or None,
         the plan's stage maps for those stages (``StageMaps``) or None).
         """
@@ -271,7 +280,8 @@ class GuidancePlanner:
             maps = None if maps is None else maps.tail(
                 k0, first_valid=abs(first - dts[0]) <= TIME_TOLERANCE_S)
             dts[0] = first
-        if len(dts) < MIN_STAGES_LEFT:
+        arrival = len(dts) < MIN_STAGES_LEFT   # the re-gridded last stages: arrival phase
+        if arrival:
             # near the end, keep enough controls for the terminal constraints (6 of them, 3 per
             # stage): re-grid the time to go into MIN_STAGES_LEFT equal stages, warm-started
             # from the plan's stage at each new stage's midpoint
@@ -283,7 +293,8 @@ class GuidancePlanner:
             maps = None
             lam = None if lam is None else lam[:, idx]
         duals = None if lam is None else {"lam": lam, "lam_t": plan.solution.duals.get("lam_t", [])}
-        return base.with_x0(x0, dts / tu), U, duals, maps
+        problem = base.with_x0(x0, dts / tu)
+        return (self._arrival(problem) if arrival else problem), U, duals, maps
 
     # ------------------------------------------------------------------ re-optimisation
     def replan(self, pos_m, vel_m_s, mass_kg, stamp_s: float, request_id: str = "",
@@ -410,9 +421,35 @@ class GuidancePlanner:
 
     @staticmethod
     def _miss(problem, X) -> float:
-        """max |terminal constraint| at the end of the trajectory X."""
-        gt, _ = problem.terminal_constraints(X[-1])
-        return float(np.max(np.abs(gt))) if gt is not None else 0.0
+        """Max terminal-constraint violation at the end of the trajectory X."""
+        gt, nti = problem.terminal_constraints(X[-1])
+        return max_violation(gt, nti)
+
+    def _arrival(self, problem):
+        """The arrival phase's terminal constraints (with ``arrival_tolerance_m`` > 0): the
+        velocity exact, the position within the tolerance of the target. In the last hours a
+        position error of the order of the navigation error cannot be removed at any acceptable
+        cost, and demanding it makes the problem infeasible and the best-effort plans trade
+        velocity for it.
+
+        The ball is s (|r - r_t| / tolerance - 1) <= 0 with s = 1 cm/s in normalised speed
+        units: a position one tolerance beyond the ball weighs as much as a 1 cm/s velocity
+        miss wherever terminal violations are compared (solver tolerances, the planner's
+        best-effort choice), and the constraint only turns active (Newton) within 10 % of R.
+        """
+        gt, _ = problem.terminal_constraints(problem.x_target)
+        if not self.arrival_tolerance_m or gt is None or gt.shape != (6,):
+            return problem
+        R = float(self.units.length(self.arrival_tolerance_m))
+        scale = float(self.units.speed(ARRIVAL_SPEED_SCALE_M_S))
+        floor2 = (1e-3 * R) ** 2
+
+        def position_ball(x, xt):
+            d = x[:3] - xt[:3]
+            return (dm.sqrt(d[0] * d[0] + d[1] * d[1] + d[2] * d[2] + floor2) * (scale / R)
+                    - scale)[None]
+
+        return replace(problem, g_tineq=position_ball, g_teq=lambda x, xt: x[3:6] - xt[3:6])
 
     @classmethod
     def terminal_miss(cls, problem, U) -> float:

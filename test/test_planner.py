@@ -8,7 +8,8 @@ import pytest
 from daddy_core.errors import DaddyError
 from daddy_ros.demo import PLANS_DIR, T0_S, DeviationMonitor, flight_steps
 from daddy_ros.sim import Errors, TruthSim
-from daddy_ros.planner import MIN_STAGE_FRACTION, MIN_STAGES_LEFT, GuidancePlanner, InputRejected
+from daddy_ros.planner import (ARRIVAL_SPEED_SCALE_M_S, MIN_STAGE_FRACTION, MIN_STAGES_LEFT,
+                               GuidancePlanner, InputRejected)
 
 
 @pytest.fixture(scope="module")
@@ -66,6 +67,30 @@ def test_shift_regrids_the_last_stages(planner):
     prob, U, _, maps = planner.shifted_problem(plan, t, x0)
     assert np.sum(prob.stage_dt) * tu == pytest.approx(dt[-2] + dt[-1])
     np.testing.assert_array_equal(U, plan.solution.U[[-2, -2, -1, -1]])
+
+
+def test_arrival_phase_targets_velocity_and_a_position_ball():
+    pl = GuidancePlanner("earth_mars", arrival_tolerance_m=300e3)
+    plan = pl.load_plan(PLANS_DIR / "earth_mars_fuel.json", T0_S)
+    x0 = plan.solution.X[0]
+    mid, _, _, _ = pl.shifted_problem(plan, plan.epoch_s + plan.stage_dt_s[0], x0)
+    assert mid.terminal_constraints(mid.x_target)[0].shape == (6,)   # not yet: exact target
+    prob, _, _, _ = pl.shifted_problem(plan, plan.end_s - 0.5 * plan.stage_dt_s[-1], x0)
+    xt = prob.x_target
+    g, n_ineq = prob.terminal_constraints(xt)
+    s = pl.units.speed(ARRIVAL_SPEED_SCALE_M_S)      # 1 cm/s: the weight of one tolerance
+    assert n_ineq == 1 and g.shape == (4,)
+    assert g[0] == pytest.approx(-s, rel=1e-2) and np.all(g[1:] == 0)
+    R = pl.units.length(300e3)
+    off = xt.copy()
+    off[0] += 2 * R                                   # twice the tolerance: violated by one
+    assert prob.terminal_constraints(off)[0][0] == pytest.approx(s, rel=1e-6)
+    off[0] = xt[0] + 0.5 * R                          # inside the ball: no miss
+    assert pl._miss(prob, np.array([off])) == 0.0
+    off[4] += 1e-3                                    # the velocity stays exact
+    assert pl._miss(prob, np.array([off])) == pytest.approx(1e-3)
+    with pytest.raises(DaddyError, match="arrival_tolerance_m"):
+        GuidancePlanner("earth_mars", arrival_tolerance_m=-1.0)
 
 
 def test_deviation_monitor_follows_the_truth_and_flags_drift():

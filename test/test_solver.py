@@ -117,7 +117,8 @@ def test_stage_maps_roll_out_and_restore_like_integration():
     from daddy_core.solver.newton import polish
     case = load_case("earth_mars")
     prob = problem_from_case(case)
-    plan = Solution.from_json(pathlib.Path(__file__).parents[1] / "daddy_ros/plans/earth_mars_fuel.json")
+    plans = pathlib.Path(__file__).parents[1] / "daddy_ros" / "plans"
+    plan = Solution.from_json(plans / "earth_mars_fuel.json")
     opts = case_options(case, True)
     maps = StageMaps.of(expand_dynamics(prob, plan.X[:-1], plan.U, prob.stage_dt), plan.X, plan.U,
                         opts.eps_da)

@@ -13,7 +13,6 @@ import time
 from dataclasses import dataclass, field
 
 import numpy as np
-from scipy.linalg import LinAlgError, cho_factor, cho_solve
 
 from .. import da
 from ..errors import DaddyError
@@ -75,11 +74,17 @@ def _feedback_map(ak: np.ndarray, bk: np.ndarray) -> da.DA:
     return da.DA(c, T)
 
 
-def _cholesky(Quu: np.ndarray, rho: float, eye: np.ndarray):
-    try:
-        return cho_factor(Quu + rho * eye, lower=True, check_finite=True)
-    except (LinAlgError, ValueError):
+def _regularised(Quu: np.ndarray, rho: float, eye: np.ndarray):
+    """Quu + rho I if it is finite and positive definite (a Cholesky factorisation exists),
+    else None. numpy's small-matrix routines: scipy's wrappers cost more than the 3x3 work."""
+    M = Quu + rho * eye
+    if not np.all(np.isfinite(M)):
         return None
+    try:
+        np.linalg.cholesky(M)
+    except np.linalg.LinAlgError:
+        return None
+    return M
 
 
 def backward_sweep(st: Stages, sweep: str, rho: float) -> Gains | None:
@@ -106,17 +111,17 @@ def backward_sweep(st: Stages, sweep: str, rho: float) -> Gains | None:
         elif fzz is not None:                              # Alg. 9: + sum_i V_x^i f^i_zz
             Qzz = Qzz_gn + np.tensordot(Vx, fzz[k], axes=(0, 0))
         Qx, Qu = Qz[:nx], Qz[nx:]
-        cf = _cholesky(Qzz[nx:, nx:], rho, eye)
+        cf = _regularised(Qzz[nx:, nx:], rho, eye)
         if cf is None and Qzz is not Qzz_gn:
             # the dynamics-Hessian terms make Q_uu indefinite at this stage (e.g. the mass-flow
             # term |u| near zero thrust): use the Gauss-Newton Q of this stage instead
             Qzz = Qzz_gn
-            cf = _cholesky(Qzz[nx:, nx:], rho, eye)
+            cf = _regularised(Qzz[nx:, nx:], rho, eye)
         if cf is None:
             return None
         Qxx, Qux, Quu = Qzz[:nx, :nx], Qzz[nx:, :nx], Qzz[nx:, nx:]
-        ak = -cho_solve(cf, Qu)
-        bk = -cho_solve(cf, Qux)
+        gains = -np.linalg.solve(cf, np.column_stack((Qu, Qux)))   # (nu, 1 + nx)
+        ak, bk = gains[:, 0], gains[:, 1:]
         a[k], b[k] = ak, bk
         dv1 += ak @ Qu
         dv2 += 0.5 * ak @ Quu @ ak

@@ -10,7 +10,7 @@ from scipy.integrate import solve_ivp
 from ..errors import DaddyError
 from .aul import aul
 from .ddp import DDPStats
-from .expansion import Multipliers, StageMaps, total_violation
+from .expansion import Multipliers, StageMaps, max_violation, total_violation
 from .newton import polish as newton_polish
 from .options import SolverOptions, parse_method
 from .solution import Solution
@@ -66,7 +66,8 @@ def validate(problem, U0: np.ndarray) -> np.ndarray:
 
 
 def repropagation_miss(problem, U: np.ndarray) -> float | None:
-    """Terminal miss after re-propagating U from x0 with DOP853 at rtol = atol = 1e-12."""
+    """Terminal miss (max terminal-constraint violation) after re-propagating U from x0 with
+    DOP853 at rtol = atol = 1e-12."""
     if problem.rhs is None:
         x = problem.rollout(U)[-1]
     else:
@@ -78,7 +79,7 @@ def repropagation_miss(problem, U: np.ndarray) -> float | None:
     gt, nti = problem.terminal_constraints(x)
     if gt is None:
         return None
-    return float(np.max(np.abs(gt)))
+    return max_violation(gt, nti)
 
 
 def objective(problem, X, U, hom) -> float:
