@@ -355,14 +355,17 @@ def _monte_carlo_run(job) -> dict:
     args, errors, seed = job
     pl, _ = nominal_planner(args.case, args.time_budget, args.arrival_tolerance_km * 1e3)
     sim = TruthSim(args.case, errors, seed=seed, t0_s=T0_S)
-    r = fly(DirectLink(pl), sim, pl, args.replan_every, args.substeps, args.final_stages,
-            args.final_substeps, args.final_min_step, **_triggers(args))
+    r = fly(DirectLink(pl), sim, pl, **_loop_settings(args))
     r.pop("flown_m")
     return r
 
 
-def _triggers(args) -> dict:
-    return {"trigger_pos_m": args.trigger_km * 1e3, "trigger_vel_m_s": args.trigger_cm_s / 100}
+def _loop_settings(args) -> dict:
+    """fly()'s time grid and re-optimisation triggers from the command line."""
+    return {"replan_every": args.replan_every, "substeps": args.substeps,
+            "final_stages": args.final_stages, "final_substeps": args.final_substeps,
+            "final_min_step": args.final_min_step, "trigger_pos_m": args.trigger_km * 1e3,
+            "trigger_vel_m_s": args.trigger_cm_s / 100}
 
 
 def _ros_demo(args, planner, errors, m_open, m0) -> int:
@@ -382,9 +385,8 @@ def _ros_demo(args, planner, errors, m_open, m0) -> int:
             print("ROS graph did not connect on loopback", flush=True)
             return 1
         sim = TruthSim(args.case, errors, seed=args.seed, t0_s=T0_S)
-        r = fly(link, sim, guidance.planner, args.replan_every, args.substeps, args.final_stages,
-                args.final_substeps, args.final_min_step,
-                progress=lambda s: print(s, flush=True), **_triggers(args))
+        r = fly(link, sim, guidance.planner, progress=lambda s: print(s, flush=True),
+                **_loop_settings(args))
     finally:
         guidance.stop()
         for ex in executors:

@@ -65,8 +65,7 @@ class TruthSim:
             umax = self.case.spacecraft.max_thrust_n
             if np.linalg.norm(u) > umax * 1.05:  # the engine cannot exceed its rating by much
                 u *= umax * 1.05 / np.linalg.norm(u)
-        un = self.units.thrust(u)
-        self.x = rk78(self.rhs, self.x, un, 0.0, float(self.units.time(dt_s)), tol=1e-12)
+        self.x = self.propagate(self.x, u, dt_s)
         self.t_s += dt_s
         return u
 

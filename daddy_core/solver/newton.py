@@ -197,10 +197,9 @@ def _stage_maps(problem, maps: StageMaps | None, X, U, fx):
     residual at Y is exact and only its derivatives carry the re-centring's truncation error.
     """
     F = expand_dynamics(problem, X[:-1], U, problem.stage_dt) if maps is None \
-        else maps.at(problem, X, U)
-    c = F.c.copy()
-    c[0] = fx
-    return da.DA(c, F.T)
+        else maps.at(problem, X, U)   # a new DA either way: its constant part is ours to set
+    F.c[0] = fx
+    return F
 
 
 def polish(problem, X, U, opts, deadline: float | None = None,
