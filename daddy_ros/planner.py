@@ -36,6 +36,9 @@ SATURATION_SLACK = 1e-3
 PLAN_FORMAT = "daddy-plan-1"
 # augmented-Lagrangian penalty a warm-started re-optimisation starts from (cold: options' 1)
 WARM_MU_INIT = 1e5
+# thrust ratings a re-plan climbs through when the one below cannot meet the target, as the
+# fraction of the thrust margin still held back (1: the derated bound, 0: the full rating)
+MARGIN_LADDER = (1.0, 0.6, 0.3, 0.0)
 
 
 class InputRejected(DaddyError):
@@ -119,12 +122,16 @@ class GuidancePlanner:
         self.units = self.case.units
         if not 0.0 <= thrust_margin < 1.0:
             raise DaddyError(f"thrust_margin must be in [0, 1), got {thrust_margin!r}")
-        # plans keep a thrust margin for closed-loop corrections; the full rating is used only
-        # when the derated problem cannot meet the target any more
-        self.full_problem = problem_from_case(self.case, stages=stages or None)
-        self.base_problem = problem_from_case(
-            self.case, stages=stages or None,
-            max_thrust_n=self.case.spacecraft.max_thrust_n * (1.0 - thrust_margin))
+        # plans keep a thrust margin for closed-loop corrections and give it up rung by rung
+        # (MARGIN_LADDER) only as far as the target demands: a fuel-optimal plan rides its
+        # bound, so a plan that took the full rating at once had nothing left for the next
+        # execution error (Monte Carlo failures, velocity misses 1.1-1.9 cm/s)
+        rating = self.case.spacecraft.max_thrust_n
+        self.rated_problems = [
+            problem_from_case(self.case, stages=stages or None,
+                              max_thrust_n=rating * (1.0 - thrust_margin * held))
+            for held in (MARGIN_LADDER if thrust_margin > 0 else (0.0,))]
+        self.base_problem = self.rated_problems[0]
         overrides = {}
         if tol_aul:
             overrides["tol_aul"] = tol_aul
@@ -310,16 +317,19 @@ class GuidancePlanner:
         problem, U_guess, duals, maps = self.shifted_problem(None if cold else current,
                                                              stamp_s, x0)
         warm = U_guess is not None
+        rung = 0
         if U_guess is None:
             U_guess = np.full((problem.N, 3), float(self.units.thrust(1e-6)))
             opts = self.options
         else:
             opts = self.replan_options
-            if problem.u_max is not None and np.max(np.linalg.norm(U_guess, axis=1)) > \
-                    problem.u_max * (1 + SATURATION_SLACK):
-                # the current plan already flies beyond the derating (its margin is spent):
-                # re-plan on the full rating instead of failing on the derated bound first
-                problem = self._full_rating(problem)
+            # the current plan may already fly above the derating: start from the lowest rating
+            # it keeps to instead of failing on the bounds below first
+            peak = float(np.max(np.linalg.norm(U_guess, axis=1)))
+            while rung + 1 < len(self.rated_problems) and \
+                    peak > self.rated_problems[rung].u_max * (1 + SATURATION_SLACK):
+                rung += 1
+            problem = self._rated(problem, rung)
         t0 = time.perf_counter()
         try:
             sol = solve(problem, U_guess, method=self.method, fuel_optimal=None, polish=self.polish,
@@ -336,21 +346,21 @@ class GuidancePlanner:
         except Exception as exc:  # a solver fault must never take the plan down
             return ReplanOutcome(False, "ERROR", f"solver raised {type(exc).__name__}: {exc}",
                                  request_id, time.perf_counter() - t0, None, warm_start=warm)
-        dt = time.perf_counter() - t0
-        if not (safe and feasible) and self.full_problem.u_max > problem.u_max:
-            # the margin is spent: allow the full thrust rating
-            full = self._full_rating(problem)
+        while not (safe and feasible) and rung + 1 < len(self.rated_problems):
+            # the target is out of reach on this rating: give up the next part of the margin
+            rung += 1
+            rated = self._rated(problem, rung)
             try:
-                sol2 = solve(full, sol.U if safe else U_guess, method=self.method,
+                sol2 = solve(rated, sol.U if safe else U_guess, method=self.method,
                              fuel_optimal=None, polish=self.polish, options=opts,
                              case_name=self.case.name)
-                assessed = self._assess(sol2, full)
-                if assessed[0] and (assessed[1] or not safe):
-                    sol, problem = sol2, full
-                    safe, feasible, why, X, miss = assessed
-            except Exception:  # keep the derated result
-                pass
-            dt = time.perf_counter() - t0
+                assessed = self._assess(sol2, rated)
+            except Exception:  # keep the result on the lower rating
+                continue
+            if assessed[0] and (assessed[1] or not safe or assessed[4] < miss):
+                sol, problem = sol2, rated
+                safe, feasible, why, X, miss = assessed
+        dt = time.perf_counter() - t0
         if not safe:
             return ReplanOutcome(False, "ERROR", why, request_id, dt, None, sol.iterations, warm)
         if not feasible and warm:
@@ -374,9 +384,10 @@ class GuidancePlanner:
             level, reason = "WARN", f"solve took {dt:.3g} s, over the {self.time_budget_s:.3g} s budget"
         return ReplanOutcome(True, level, reason, request_id, dt, plan, sol.iterations, warm)
 
-    def _full_rating(self, problem):
-        """``problem`` with the full thrust rating instead of the derated bound."""
-        return replace(problem, u_max=self.full_problem.u_max, g_ineq=self.full_problem.g_ineq)
+    def _rated(self, problem, rung: int):
+        """``problem`` with the thrust bound of ``rated_problems[rung]``."""
+        rated = self.rated_problems[rung]
+        return replace(problem, u_max=rated.u_max, g_ineq=rated.g_ineq)
 
     def _assess(self, sol: Solution, problem):
         """(safe to fly, meets every constraint, reason, X, terminal miss). Safe: finite and

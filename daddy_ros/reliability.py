@@ -652,7 +652,7 @@ def solver_faults(sizes: Sizes, workdir: Path) -> list[Row]:
 
     def _inject(client, node):
         pl = node.planner
-        base, full, ropts = pl.base_problem, pl.full_problem, pl.replan_options
+        base, ropts = pl.base_problem, pl.replan_options   # every rating's problem derives from base
         pos, vel, mass = sim.truth_si()
         t = sim.t_s
         if not _good_request(client, "warm-up", pos, vel, mass, t):
@@ -661,16 +661,14 @@ def solver_faults(sizes: Sizes, workdir: Path) -> list[Row]:
             "no convergence": lambda: setattr(pl, "replan_options", ropts.with_(
                 ddp_max_iter=1, aul_max_iter=1, newton_max_iter=1)),
             "time budget": lambda: node.set_parameters([Parameter("time_budget_s", value=1e-3)]),
-            "dynamics raise": lambda: (setattr(pl, "base_problem", replace(
-                base, step=faulty_step(base.step, 3, "raise"))), setattr(
-                pl, "full_problem", replace(full, step=faulty_step(full.step, 3, "raise")))),
-            "dynamics NaN": lambda: (setattr(pl, "base_problem", replace(
-                base, step=faulty_step(base.step, 3, "nan"))), setattr(
-                pl, "full_problem", replace(full, step=faulty_step(full.step, 3, "nan")))),
+            "dynamics raise": lambda: setattr(pl, "base_problem", replace(
+                base, step=faulty_step(base.step, 3, "raise"))),
+            "dynamics NaN": lambda: setattr(pl, "base_problem", replace(
+                base, step=faulty_step(base.step, 3, "nan"))),
         }
 
         def heal():
-            pl.base_problem, pl.full_problem, pl.replan_options = base, full, ropts
+            pl.base_problem, pl.replan_options = base, ropts
             node.set_parameters([Parameter("time_budget_s", value=60.0)])
 
         for rep in range(sizes.solver_repeats):

@@ -124,6 +124,27 @@ def test_flight_steps_cover_the_transfer_and_shrink_to_the_end():
     np.testing.assert_allclose(periodic, [2.0, 4.0, 6.0])
 
 
+def test_replan_gives_up_the_thrust_margin_only_as_far_as_needed():
+    """The nominal Earth-Mars plan ends on a burn at the derated bound; 5 m/s less speed along
+    it cannot be made up on the derated bound, but the next rung of the margin ladder suffices
+    -- the plan must not jump to the full rating and leave nothing for later errors."""
+    pl = GuidancePlanner("earth_mars")
+    plan = pl.load_plan(PLANS_DIR / "earth_mars_fuel.json", T0_S)
+    full = pl.case.spacecraft.max_thrust_n
+    ratings = [float(pl.units.thrust_n(p.u_max)) for p in pl.rated_problems]   # [N]
+    assert ratings[0] == pytest.approx(0.95 * full) and ratings[-1] == pytest.approx(full)
+    assert np.all(np.diff(ratings) > 0)
+    k = 34                                               # inside the last burn
+    peak = np.linalg.norm(plan.thrust_n[k:], axis=1)
+    assert np.allclose(peak, ratings[0], rtol=1e-6)      # riding the derated bound
+    t = plan.epoch_s + np.sum(plan.stage_dt_s[:k])
+    s = plan.states_si[k]
+    along = plan.thrust_n[k] / np.linalg.norm(plan.thrust_n[k])
+    out = pl.replan(s[:3], s[3:6] - 5.0 * along, s[6], t, "behind", now_s=t)
+    assert out.ok and out.level == "OK", out.reason
+    new_peak = np.max(np.linalg.norm(out.plan.thrust_n, axis=1))
+    assert ratings[0] * 1.001 < new_peak <= ratings[1] * 1.001
+
 @pytest.mark.parametrize("pos_scale, vel_nan, mass, stamp, now, field", [
     (1.0, True, 900.0, T0_S, None, "twist.twist.linear"),
     (1e-3, False, 900.0, T0_S, None, "heliocentric"),
