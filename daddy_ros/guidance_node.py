@@ -57,6 +57,10 @@ PARAMETERS = {  # name: (default, description)
     "arrival_tolerance_m": (0.0, "in the arrival phase (the last re-gridded stages) the terminal "
                                  "position may be this far from the target, the velocity stays "
                                  "exact [m]; 0: position exact too"),
+    "thrust_margin": (0.05, "fraction of the thrust rating plans hold back for closed-loop "
+                            "corrections; a re-optimisation gives it up in steps (with 0.05: 95, "
+                            "97, 98.5, 100 % of the rating) only when the target is out of reach "
+                            "otherwise; 0: the full rating"),
     "staleness_s": (600.0, "estimates older than this relative to the request are rejected [s]"),
     "frame_id": ("earth_moon_rotating", "frame of state estimates and thrust"),
     "plan_file": ("", "nominal plan (solution JSON) adopted at the first estimate; empty: the "
@@ -94,7 +98,7 @@ class GuidanceNode(Node):
             fuel_optimal=g("fuel_optimal"), stages=g("stages"), time_budget_s=g("time_budget_s"),
             staleness_s=g("staleness_s"), tol_aul=g("tol_aul") or None,
             tol_newton=g("tol_newton") or None, restore_first=g("restore_first"),
-            arrival_tolerance_m=g("arrival_tolerance_m"))
+            arrival_tolerance_m=g("arrival_tolerance_m"), thrust_margin=g("thrust_margin"))
         self.plan_file = g("plan_file") or self._bundled_plan()
         self._lock = threading.Lock()
         self._wake = threading.Condition(self._lock)
@@ -394,7 +398,8 @@ class GuidanceNode(Node):
                            "plan_kept": "no" if out.ok else "yes"})
         if plan is not None:
             values.update({"max_violation": f"{plan.max_violation:.3e}",
-                           "final_mass_kg": f"{plan.states_si[-1, 6]:.4f}"})
+                           "final_mass_kg": f"{plan.states_si[-1, 6]:.4f}",
+                           "thrust_bound_n": f"{plan.thrust_bound_n:.6g}"})
         self._diag(level, reason, values, stamp)
         with self._lock:
             self._last = (level, reason, bool(out is not None and out.ok))

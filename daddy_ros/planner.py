@@ -56,6 +56,8 @@ class Plan:
         states_si: (K+1, 7) predicted states (m, m/s, kg).
         solution: the Solution (normalised), for warm starts.
         request_id, solve_time_s, warm_start, max_violation: provenance for diagnostics.
+        thrust_bound_n: the thrust bound the plan was optimised under [N] (a rung of the
+            margin ladder, see ``GuidancePlanner``).
     """
 
     epoch_s: float
@@ -67,6 +69,7 @@ class Plan:
     solve_time_s: float = 0.0
     warm_start: bool = False
     max_violation: float = 0.0
+    thrust_bound_n: float = 0.0
 
     @property
     def stage_start_s(self) -> np.ndarray:
@@ -325,10 +328,7 @@ class GuidancePlanner:
             opts = self.replan_options
             # the current plan may already fly above the derating: start from the lowest rating
             # it keeps to instead of failing on the bounds below first
-            peak = float(np.max(np.linalg.norm(U_guess, axis=1)))
-            while rung + 1 < len(self.rated_problems) and \
-                    peak > self.rated_problems[rung].u_max * (1 + SATURATION_SLACK):
-                rung += 1
+            rung = self._rung_for(U_guess)
             problem = self._rated(problem, rung)
         t0 = time.perf_counter()
         try:
@@ -373,7 +373,8 @@ class GuidancePlanner:
         plan = Plan(epoch_s=stamp_s, stage_dt_s=problem.stage_dt * self.units.tu_s,
                     thrust_n=sol.U_newton.copy(), states_si=self.states_to_si(X),
                     solution=sol, request_id=request_id, solve_time_s=dt, warm_start=warm,
-                    max_violation=sol.max_violation)
+                    max_violation=sol.max_violation,
+                    thrust_bound_n=float(self.units.thrust_n(problem.u_max)))
         self.set_plan(plan)
         level, reason = "OK", "re-optimised"
         if not feasible:
@@ -383,6 +384,15 @@ class GuidancePlanner:
         if dt > self.time_budget_s:
             level, reason = "WARN", f"solve took {dt:.3g} s, over the {self.time_budget_s:.3g} s budget"
         return ReplanOutcome(True, level, reason, request_id, dt, plan, sol.iterations, warm)
+
+    def _rung_for(self, U: np.ndarray) -> int:
+        """The lowest rung of the margin ladder whose bound the controls U (K, 3) keep to."""
+        peak = float(np.max(np.linalg.norm(U, axis=1)))
+        rung = 0
+        while rung + 1 < len(self.rated_problems) and \
+                peak > self.rated_problems[rung].u_max * (1 + SATURATION_SLACK):
+            rung += 1
+        return rung
 
     def _rated(self, problem, rung: int):
         """``problem`` with the thrust bound of ``rated_problems[rung]``."""
@@ -488,8 +498,10 @@ class GuidancePlanner:
                                               sol.X, sol.U, self.replan_options.eps_da)
             except (DaddyError, ValueError, FloatingPointError):
                 sol.stage_maps = None   # re-optimisations then roll out and expand afresh
+        bound = self.rated_problems[self._rung_for(sol.U)].u_max
         plan = Plan(epoch_s, sol.stage_dt * self.units.tu_s, sol.U_newton.copy(),
-                    self.states_to_si(sol.X), sol, request_id, 0.0, False, sol.max_violation)
+                    self.states_to_si(sol.X), sol, request_id, 0.0, False, sol.max_violation,
+                    float(self.units.thrust_n(bound)))
         self.set_plan(plan)
         return plan
 

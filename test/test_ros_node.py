@@ -127,16 +127,19 @@ def test_nominal_then_replan_publishes_valid_schedule(graph):
     st, vals = got
     assert st.level == DiagnosticStatus.OK, st.message
     assert st.name.startswith("daddy_guidance")
-    for key in ("request_id", "solve_time_s", "max_violation", "final_mass_kg", "method", "warm_start"):
+    for key in ("request_id", "solve_time_s", "max_violation", "final_mass_kg", "method", "warm_start",
+                "thrust_bound_n"):
         assert key in vals
     assert vals["warm_start"] == "yes"
+    bound = float(vals["thrust_bound_n"])          # a rung of the margin ladder: 95-100 % of 0.5 N
+    assert 0.95 * 0.5 * (1 - 1e-9) <= bound <= 0.5 * (1 + 1e-9)
     sched = c.wait_for(lambda: [s for s in c.schedules if cv.stamp_to_s(s.header.stamp) >= t - 1e-3], 10)
     assert sched
     starts, u = cv.joint_trajectory_to_schedule(sched[-1])
     assert sched[-1].joint_names == ["thrust_x", "thrust_y", "thrust_z"]
     assert sched[-1].header.frame_id == FRAME
     assert len(u) == 40 - k and np.all(np.isfinite(u))
-    assert np.all(np.linalg.norm(u, axis=1) <= 0.5 * (1 + 1e-6))
+    assert np.all(np.linalg.norm(u, axis=1) <= bound * (1 + 1e-6))
     assert np.all(np.diff(starts) > 0) and starts[0] == pytest.approx(0.0)
 
 
