@@ -82,6 +82,8 @@ def stack(items, axis: int = 0):
     """Stack floats, arrays and DA along a new ``axis`` (of the value shape)."""
     das = [x for x in items if isinstance(x, DA)]
     if not das:
+        if axis == 0:   # the same array; np.stack's checks cost ~10x for a few scalars
+            return np.array(items)
         return np.stack([np.asarray(x) for x in items], axis=axis)
     ref = das[0]
     coeffs = []
