@@ -39,6 +39,8 @@ WARM_MU_INIT = 1e5
 # thrust ratings a re-plan climbs through when the one below cannot meet the target, as the
 # fraction of the thrust margin still held back (1: the derated bound, 0: the full rating)
 MARGIN_LADDER = (1.0, 0.6, 0.3, 0.0)
+# the climb stops when a rung leaves more than this fraction of the miss of the rung below
+LADDER_MIN_GAIN = 0.9
 
 
 class InputRejected(DaddyError):
@@ -358,8 +360,13 @@ class GuidancePlanner:
             except Exception:  # keep the result on the lower rating
                 continue
             if assessed[0] and (assessed[1] or not safe or assessed[4] < miss):
+                stalled = safe and not assessed[1] and assessed[4] > LADDER_MIN_GAIN * miss
                 sol, problem = sol2, rated
                 safe, feasible, why, X, miss = assessed
+                if stalled:
+                    # more thrust hardly reduced the miss: what is left is not a thrust deficit
+                    # (e.g. navigation error in the last minutes); stop climbing
+                    break
         dt = time.perf_counter() - t0
         if not safe:
             return ReplanOutcome(False, "ERROR", why, request_id, dt, None, sol.iterations, warm)
