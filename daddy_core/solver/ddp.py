@@ -144,8 +144,10 @@ def forward_pass(st: Stages, gains: Gains, alpha: float, dyn: bool):
 
     Returns:
         X* (N+1, nx), U* (N, nu), poly (N,) bool: stage propagated by the stored map,
-        dz (n, N): the stage deviations [dx; du] from the nominal, ok: every state finite (an
-        integration that fails ends the pass).
+        dz (n, N): the stage deviations [dx; du] from the nominal, ok: every state finite and
+        every mass positive (a stage that fails either ends the pass: thrust / mass has no
+        meaning beyond, and an Earth-Mars cold re-solve whose steps ran the mass negative
+        never recovered).
     """
     p = st.problem
     N, nx, nu = p.N, p.nx, p.nu
@@ -155,6 +157,7 @@ def forward_pass(st: Stages, gains: Gains, alpha: float, dyn: bool):
     poly = np.zeros(N, dtype=bool)
     dz = np.zeros((nx + nu, N))
     T, c = st.F.T, st.F.c
+    im = p.mass_index
     for k in range(N):
         z = dz[:, k]
         z[:nx] = X[k] - st.X[k]
@@ -163,14 +166,14 @@ def forward_pass(st: Stages, gains: Gains, alpha: float, dyn: bool):
         if dyn and math.sqrt(z @ z) < st.radius[k]:                  # eq. 11, first case
             X[k + 1] = c[:, :, k].T @ da.monomial_values(z, T)
             poly[k] = True
-            continue
-        try:
-            X[k + 1] = p.stage_flow(X[k], U[k], k)
-        except (DaddyError, FloatingPointError, OverflowError):
+        else:
+            try:
+                X[k + 1] = p.stage_flow(X[k], U[k], k)
+            except (DaddyError, FloatingPointError, OverflowError):
+                return X, U, poly, dz, False
+        if not np.all(np.isfinite(X[k + 1])) or (im is not None and X[k + 1, im] <= 0.0):
             return X, U, poly, dz, False
-        if not np.all(np.isfinite(X[k + 1])):
-            return X, U, poly, dz, False
-    return X, U, poly, dz, bool(np.all(np.isfinite(X[-1])))
+    return X, U, poly, dz, True
 
 
 def new_maps(st: Stages, X, U, poly, dz, dyn: bool):
