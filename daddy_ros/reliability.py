@@ -652,7 +652,8 @@ def solver_faults(sizes: Sizes, workdir: Path) -> list[Row]:
 
     def _inject(client, node):
         pl = node.planner
-        base, ropts = pl.base_problem, pl.replan_options   # every rating's problem derives from base
+        # every rung of the thrust-margin ladder derives its problem from base_problem
+        base, ropts = pl.base_problem, pl.replan_options
         pos, vel, mass = sim.truth_si()
         t = sim.t_s
         if not _good_request(client, "warm-up", pos, vel, mass, t):

@@ -145,6 +145,7 @@ def test_replan_gives_up_the_thrust_margin_only_as_far_as_needed():
     new_peak = np.max(np.linalg.norm(out.plan.thrust_n, axis=1))
     assert ratings[0] * 1.001 < new_peak <= ratings[1] * 1.001
 
+
 @pytest.mark.parametrize("pos_scale, vel_nan, mass, stamp, now, field", [
     (1.0, True, 900.0, T0_S, None, "twist.twist.linear"),
     (1e-3, False, 900.0, T0_S, None, "heliocentric"),

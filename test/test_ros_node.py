@@ -127,8 +127,8 @@ def test_nominal_then_replan_publishes_valid_schedule(graph):
     st, vals = got
     assert st.level == DiagnosticStatus.OK, st.message
     assert st.name.startswith("daddy_guidance")
-    for key in ("request_id", "solve_time_s", "max_violation", "final_mass_kg", "method", "warm_start",
-                "thrust_bound_n"):
+    for key in ("request_id", "solve_time_s", "max_violation", "final_mass_kg", "method",
+                "warm_start", "thrust_bound_n"):
         assert key in vals
     assert vals["warm_start"] == "yes"
     bound = float(vals["thrust_bound_n"])          # a rung of the margin ladder: 95-100 % of 0.5 N
