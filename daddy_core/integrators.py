@@ -178,38 +178,38 @@ def rk78(rhs, x, u, t0, dt, tol: float = 1e-13, h0=None, max_steps: int = 10_000
     return x
 
 
-_RK78_ROWS = [[(j, a) for j, a in enumerate(row) if a != 0.0] for row in RK78_A]
-_RK78_BROW = [(j, b) for j, b in enumerate(RK78_B) if b != 0.0]
+_RK78_AMAT = np.zeros((13, 13))
+for _i, _row in enumerate(RK78_A):
+    _RK78_AMAT[_i, :len(_row)] = _row
+_RK78_ERRW = np.zeros(13)
+_RK78_ERRW[[0, 10, 11, 12]] = [RK78_ERR, RK78_ERR, -RK78_ERR, -RK78_ERR]
 
 
 def _rk78_single(rhs, x, u, t0, dt, tol, h0, max_steps, stats):
     """RK78 for one float state: same scheme and step control as the batched path, without
-    the batch bookkeeping (the Std/Dyn forward passes integrate one stage at a time)."""
+    the batch bookkeeping (the Std/Dyn forward passes integrate one stage at a time). The
+    stage derivatives live in the rows of one (13, nx) array, so each stage's combination
+    x + h sum_j a_ij k_j is one small matrix product."""
     t, t_end = t0, t0 + dt
     direction = 1.0 if dt >= 0 else -1.0
     h = abs(dt) / 8.0 if h0 is None else abs(float(h0))
     if h == 0.0:
         return x
+    K = np.empty((13, x.shape[0]))
     n_steps = 0
     while abs(t_end - t) > 1e-15 * max(1.0, abs(t_end)):
         n_steps += 1
         if n_steps > max_steps:
             raise DaddyError(f"rk78 exceeded max_steps={max_steps} (stiff or singular dynamics?)")
         hs = min(h, abs(t_end - t)) * direction
-        ks = []
-        for i in range(13):
-            xi = x
-            for j, a in _RK78_ROWS[i]:
-                xi = xi + ks[j] * (a * hs)
-            ks.append(rhs(t + RK78_C[i] * hs, xi, u))
-        err = float(np.max(np.abs((ks[0] + ks[10] - ks[11] - ks[12]) * (RK78_ERR * hs))))
+        K[0] = rhs(t, x, u)
+        for i in range(1, 13):
+            K[i] = rhs(t + RK78_C[i] * hs, x + (_RK78_AMAT[i, :i] @ K[:i]) * hs, u)
+        err = float(np.max(np.abs(_RK78_ERRW @ K))) * abs(hs)
         if not math.isfinite(err):
             raise DaddyError("rk78: dynamics returned NaN or inf")
         if err <= tol:
-            acc = ks[5] * RK78_B[5]
-            for j, b in _RK78_BROW[1:]:
-                acc = acc + ks[j] * b
-            x = x + acc * hs
+            x = x + (RK78_B @ K) * hs
             t += hs
         h = abs(hs) * min(5.0, max(0.2, 0.8 * (tol / max(err, 1e-300)) ** 0.125))
     if stats is not None:

@@ -70,54 +70,44 @@ class _Model:
         self._build_jacobian()
 
     # rows: [g_0 active, h_0, g_1 active, h_1, ..., g_{N-1}, h_{N-1}, g_N active]
+    # columns: Y = [u_0, x_1, u_1, x_2, ..., u_{N-1}, x_N], block k = [u_k, x_{k+1}] of width n
     def _build_jacobian(self):
         p = self.p
         nx, nu, N = p.nx, p.nu, p.N
         w = nx + nu
+        n_g = self.g_active.sum(axis=0)                              # (N,) active rows per stage
+        start = np.concatenate([[0], np.cumsum(n_g + nx)])           # first row of each stage
+        self.row_slices = list(zip(start[:-1].tolist(), start[1:].tolist()))
+        z_cols = np.concatenate([np.arange(nu, w) - w, np.arange(nu)])   # [x_k, u_k] - k w
+        parts = []                                                   # (rows, cols, vals) blocks
+
+        def stage_rows(rows, ks, Jz):
+            """Rows depending on z_k = [x_k, u_k] (Jz: (m, n)); x_0 is fixed (no columns)."""
+            cols = ks[:, None] * w + z_cols[None, :]
+            keep = cols >= 0
+            parts.append((np.broadcast_to(rows[:, None], cols.shape)[keep], cols[keep],
+                          Jz[keep]))
+
+        if self.G is not None and n_g.sum():
+            gz = np.moveaxis(self.G.gradient(), 1, 0)                 # (N, n_c, n)
+            ks, ii = np.nonzero(self.g_active.T)                     # stage-major order
+            rank = np.arange(ks.size) - np.concatenate([[0], np.cumsum(n_g)])[ks]
+            stage_rows(start[ks] + rank, ks, gz[ks, ii])
         fz = np.moveaxis(self.F.gradient(), 1, 0)                      # (N, nx, n)
-        gz = np.moveaxis(self.G.gradient(), 1, 0) if self.G is not None else None
-        rows, cols, vals = [], [], []
-        r = 0
-        self.row_slices = []
-        for k in range(N):
-            ucol = k * w                                             # u_k
-            xcol = (k - 1) * w + nu                                  # x_k (k >= 1)
-            xnext = k * w + nu                                       # x_{k+1}
-            idx = np.flatnonzero(self.g_active[:, k])
-            start = r
-            for i in idx:
-                J = gz[k, i]
-                if k > 0:
-                    rows += [r] * nx
-                    cols += list(range(xcol, xcol + nx))
-                    vals += list(J[:nx])
-                rows += [r] * nu
-                cols += list(range(ucol, ucol + nu))
-                vals += list(J[nx:])
-                r += 1
-            J = fz[k]
-            for i in range(nx):
-                if k > 0:
-                    rows += [r] * nx
-                    cols += list(range(xcol, xcol + nx))
-                    vals += list(-J[i, :nx])
-                rows += [r] * nu
-                cols += list(range(ucol, ucol + nu))
-                vals += list(-J[i, nx:])
-                rows.append(r)
-                cols.append(xnext + i)
-                vals.append(1.0)
-                r += 1
-            self.row_slices.append((start, r))
-        if self.Gt is not None:
-            gtx = self.Gt.gradient()
-            xcol = (N - 1) * w + nu
-            for i in np.flatnonzero(self.t_active):
-                rows += [r] * nx
-                cols += list(range(xcol, xcol + nx))
-                vals += list(gtx[i])
-                r += 1
+        ks = np.repeat(np.arange(N), nx)
+        ii = np.tile(np.arange(nx), N)
+        h_rows = start[ks] + n_g[ks] + ii                            # h_k = x_{k+1} - f(x_k, u_k)
+        stage_rows(h_rows, ks, -fz.reshape(N * nx, w))
+        parts.append((h_rows, ks * w + nu + ii, np.ones(N * nx)))
+        r = int(start[-1])
+        if self.Gt is not None and self.t_active.any():
+            gtx = self.Gt.gradient()[self.t_active]                  # (m, nx) on x_N
+            m = gtx.shape[0]
+            rows = np.repeat(np.arange(r, r + m), nx)
+            parts.append((rows, np.tile((N - 1) * w + nu + np.arange(nx), m), gtx.ravel()))
+            r += m
         self.n_rows = r
+        rows, cols, vals = (np.concatenate(x) for x in zip(*parts))
         self.D = sp.csr_matrix((vals, (rows, cols)), shape=(r, N * w))
 
     def residual(self, dY: np.ndarray | None = None) -> np.ndarray:
