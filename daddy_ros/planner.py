@@ -41,11 +41,6 @@ WARM_MU_INIT = 1e5
 MARGIN_LADDER = (1.0, 0.6, 0.3, 0.0)
 # the climb stops when a rung leaves more than this fraction of the miss of the rung below
 LADDER_MIN_GAIN = 0.9
-# augmented-Lagrangian tolerance of a polished re-optimisation (unless tol_aul is given): the
-# AUL hands over to Newton after ~1 DDP iteration from the warm start, a real-time-iteration
-# scheme whose next re-plan continues the optimisation (measured, bench_replan perturbations:
-# halo 4 AUL / 8 DDP iterations -> 1 / 1, final mass within 0.1 g; Earth-Mars 5 g lighter)
-REPLAN_TOL_AUL = 1e-5
 
 
 class InputRejected(DaddyError):
@@ -158,13 +153,10 @@ class GuidancePlanner:
         # (halo warm replan 33 s -> ~4 s) and rho carries over between solves. restore_first:
         # Newton first restores feasibility, so that a solve stopped by its time budget still
         # flies a feasible plan from the new state (costs ~0.3 s on Earth-Mars).
-        replan_tol_aul = self.options.tol_aul if tol_aul or not self.polish else \
-            max(self.options.tol_aul, REPLAN_TOL_AUL)
         self.replan_options = self.options.with_(homotopy=self.options.homotopy[-1:],
                                                  ddp_min_iter=1, mu_init=WARM_MU_INIT,
                                                  short_step=0.5, carry_rho=True,
-                                                 restore_warm_start=bool(restore_first),
-                                                 tol_aul=replan_tol_aul)
+                                                 restore_warm_start=bool(restore_first))
         self.time_budget_s = time_budget_s
         self.staleness_s = staleness_s
         self.mass_tolerance_kg = mass_tolerance_kg
