@@ -208,9 +208,9 @@ def solve(problem, u_guess=None, method: str = "dyn", fuel_optimal: bool | None 
     newton_iters, t_newton = restore_iters, 0.0
     if polish and not fallback:
         t0 = time.perf_counter()
-        # the last DDP maps, re-centred where the iterate stays inside their radius; an outer
-        # iteration that does not reduce the exact residual expands afresh (``polish``)
-        pres = newton_polish(problem, X, U, opts, deadline, maps=final_maps)
+        # fresh expansions first: the Dyn pass's maps, re-centred again and again, carry
+        # derivative errors that stalled the polishing (measured on the halo re-plans)
+        pres = newton_polish(problem, X, U, opts, deadline)
         t_newton = time.perf_counter() - t0
         newton_iters += pres.iterations
         if progress:
