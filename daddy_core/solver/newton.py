@@ -77,7 +77,6 @@ class _Model:
         w = nx + nu
         n_g = self.g_active.sum(axis=0)                              # (N,) active rows per stage
         start = np.concatenate([[0], np.cumsum(n_g + nx)])           # first row of each stage
-        self.row_slices = list(zip(start[:-1].tolist(), start[1:].tolist()))
         z_cols = np.concatenate([np.arange(nu, w) - w, np.arange(nu)])   # [x_k, u_k] - k w
         parts = []                                                   # (rows, cols, vals) blocks
 
