@@ -46,14 +46,15 @@ def test_rk78_fewer_rhs_calls_than_rk4_for_same_accuracy():
     assert stats["rhs_calls"] < 4 * steps
 
 
-def test_batched_rk78_with_different_stage_lengths():
+@pytest.mark.parametrize("B", [3, 12])   # state by state (<= 8) and vectorised
+def test_batched_rk78_with_different_stage_lengths(B):
     case = load_case("earth_mars")
     rhs = case.rhs()
-    X = np.tile(case.x0[:, None], (1, 3))
-    U = np.zeros((3, 3))
-    dts = np.array([0.05, 0.15, 0.3])
+    X = np.tile(case.x0[:, None], (1, B))
+    U = np.zeros((3, B))
+    dts = np.linspace(0.05, 0.3, B)
     xb = rk78(rhs, X, U, 0.0, dts, tol=1e-13)
-    for j in range(3):
+    for j in range(B):
         np.testing.assert_allclose(xb[:, j], reference(rhs, case.x0, np.zeros(3), dts[j]), atol=1e-11)
 
 

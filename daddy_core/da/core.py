@@ -236,12 +236,9 @@ class DA:
             return DA(out, T)
         if k == 2:
             n = T.n
-            d1 = self.c[1:n + 1]
-            sq = _outer_sym(d1, d1, T)
-            out = np.empty_like(self.c)
+            out = self.c * derivs[1]
             out[0] = derivs[0]
-            np.multiply(d1, derivs[1], out=out[1:n + 1])
-            out[n + 1:] = self.c[n + 1:] * derivs[1] + sq * derivs[2]
+            out[n + 1:] += _outer_sym(self.c[1:n + 1], self.c[1:n + 1], T) * derivs[2]
             return DA(out, T)
         d = self._nilpotent()
         r = _constant_like(d, 0.0) + 0.0
@@ -253,7 +250,7 @@ class DA:
 
     def reciprocal(self) -> "DA":
         a0 = self.cons
-        if np.any(a0 == 0) or not np.all(np.isfinite(a0)):
+        if not (np.isfinite(a0) & (a0 != 0)).all():
             raise DomainError(f"1/x of a DA whose constant part is {_first_bad(a0, a0 != 0)}")
         inv = 1.0 / a0
         derivs = [inv]
@@ -263,24 +260,23 @@ class DA:
 
     def sqrt(self) -> "DA":
         a0 = self.cons
-        if not np.all(a0 > 0):
+        if not (a0 > 0).all():
             raise DomainError(f"sqrt of a DA whose constant part is {_first_bad(a0, a0 > 0)} "
                               "(must be > 0)")
         return self._power(0.5, checked=True)
 
     def _power(self, p: float, checked: bool = False) -> "DA":
         a0 = self.cons
-        if not checked and not float(p).is_integer() and not np.all(a0 > 0):
+        integer = float(p).is_integer()
+        if not checked and not integer and not (a0 > 0).all():
             raise DomainError(f"x**{p} of a DA whose constant part is {_first_bad(a0, a0 > 0)} "
                               "(must be > 0)")
-        if float(p).is_integer() and p < 0 and np.any(a0 == 0):
+        if integer and p < 0 and (a0 == 0).any():
             raise DomainError(f"x**{p} of a DA whose constant part is 0")
         inv = 1.0 / a0
-        derivs = [a0 ** p]
-        coef = 1.0
+        derivs = [a0 ** p]   # f^(j) / j! = C(p, j) a0^(p - j)
         for j in range(1, self.order + 1):
-            coef *= (p - j + 1) / j
-            derivs.append(coef * a0 ** p * inv ** j)
+            derivs.append(derivs[-1] * inv * ((p - j + 1) / j))
         return self.series(derivs)
 
     def exp(self) -> "DA":

@@ -71,10 +71,17 @@ def repropagation_miss(problem, U: np.ndarray) -> float | None:
     if problem.rhs is None:
         x = problem.rollout(U)[-1]
     else:
+        rhs = problem.rhs
+        # a rhs that reads its arguments by index runs ~3x faster on Python floats (rk78's note)
+        scalar = getattr(rhs, "scalar_components", False)
         x = problem.x0.copy()
         for k in range(problem.N):
-            sol = solve_ivp(lambda t, y, uk=U[k]: problem.rhs(t, y, uk), (0.0, problem.stage_dt[k]),
-                            x, method="DOP853", rtol=1e-12, atol=1e-12)
+            if scalar:
+                fun = (lambda t, y, uk=U[k].tolist(): rhs(t, y.tolist(), uk))
+            else:
+                fun = (lambda t, y, uk=U[k]: rhs(t, y, uk))
+            sol = solve_ivp(fun, (0.0, problem.stage_dt[k]), x, method="DOP853", rtol=1e-12,
+                            atol=1e-12)
             x = sol.y[:, -1]
     gt, nti = problem.terminal_constraints(x)
     if gt is None:
