@@ -158,16 +158,20 @@ def flow_step(rhs, integrator: str = "rk78", tol: float = 1e-13, rk4_steps: int 
     if integrator == "rk78":
         dtol = tol if derivative_tol is None else max(tol, float(derivative_tol))
 
-        def step(x, u, dt):
+        def step(x, u, dt, values=None):
+            """values: for a DA x, the flows (nx, B) at its constant part when the caller has
+            them already (integrated at ``tol``); they become the constant part as they are."""
             # every integration first tries the whole stage (h0 = dt): measured on the nominal
             # plans' stages at tol 1e-13, halo 1.6 steps per stage instead of 3.2 with rk78's
             # default dt / 8, Earth-Mars 2.9 instead of 3.3
             if dtol > tol and isinstance(x, DA):
                 F = rk78(rhs, x, u, 0.0, dt, tol=dtol, h0=dt)
-                F.c[0] = rk78(rhs, x.cons, dm.cons(u), 0.0, dt, tol=tol, h0=dt)
+                F.c[0] = rk78(rhs, x.cons, dm.cons(u), 0.0, dt, tol=tol, h0=dt) \
+                    if values is None else values
                 return F
             return rk78(rhs, x, u, 0.0, dt, tol=tol, h0=dt)
         step.unbatched_ok = True   # also takes x (nx,), u (nu,), scalar dt
+        step.takes_values = True   # takes values= (see step's docstring)
         return step
     if integrator == "rk4":
         return lambda x, u, dt: rk4(rhs, x, u, 0.0, dt, steps=rk4_steps)

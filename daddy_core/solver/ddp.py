@@ -194,10 +194,12 @@ def forward_pass(st: Stages, gains: Gains, alpha: float, dyn: bool):
 
 def new_maps(st: Stages, X, U, poly, dz, dyn: bool):
     """Stage maps at the new nominal: one batched expansion of the integrated stages and one
-    batched re-centring (composition) of the stages served by their polynomial."""
+    batched re-centring (composition) of the stages served by their polynomial. The forward
+    pass integrated X[k+1] from (X[k], U[k]) wherever stage k is re-expanded: those flows are
+    the expansions' constant parts (not integrated twice)."""
     if not dyn:
-        return expand_dynamics(st.problem, X[:-1], U, st.problem.stage_dt)
-    return maps_at(st.problem, st.F, dz, poly, X, U)
+        return expand_dynamics(st.problem, X[:-1], U, st.problem.stage_dt, values=X[1:].T)
+    return maps_at(st.problem, st.F, dz, poly, X, U, values=X[1:].T)
 
 
 # ----------------------------------------------------------------------------------- the loop

@@ -108,21 +108,32 @@ class Stages:
         self.cost = float(np.sum(lt.cons) + phi.cons)
 
 
-def expand_dynamics(problem, X: np.ndarray, U: np.ndarray, dt: np.ndarray):
+def expand_dynamics(problem, X: np.ndarray, U: np.ndarray, dt: np.ndarray, values=None):
     """Order-2 stage maps at (X[k], U[k]) for the given stages, in one batched call.
 
     Args:
         X: (B, nx) stage start states; U: (B, nu) controls; dt: (B,) stage durations.
+        values: (nx, B) the stage flows f(X[k], U[k]) when the caller has integrated them
+            already (a forward pass, Newton's residual): they become the maps' constant parts,
+            and a step that ``takes_values`` does not integrate them again.
     Returns:
         DA of shape (nx, B) in n = nx + nu variables.
     """
     if X.shape[0] == 0:
         raise DaddyError("expand_dynamics needs at least one stage")
     z = da.variables(np.concatenate([X.T, U.T]), order=2)
-    return problem.step(z[:problem.nx], z[problem.nx:], dt)
+    x, u = z[:problem.nx], z[problem.nx:]
+    if values is None:
+        return problem.step(x, u, dt)
+    if getattr(problem.step, "takes_values", False):
+        return problem.step(x, u, dt, values=values)
+    F = problem.step(x, u, dt)
+    F.c[0] = values
+    return F
 
 
-def maps_at(problem, F, dz: np.ndarray, inside: np.ndarray, X: np.ndarray, U: np.ndarray):
+def maps_at(problem, F, dz: np.ndarray, inside: np.ndarray, X: np.ndarray, U: np.ndarray,
+            values=None):
     """Stage maps at a new nominal from maps F of a nearby one (paper eq. 11 / Alg. 8).
 
     The stages flagged ``inside`` (deviation within F's convergence radius) are re-centred by
@@ -133,17 +144,20 @@ def maps_at(problem, F, dz: np.ndarray, inside: np.ndarray, X: np.ndarray, U: np
         dz: (n, N) deviations [dx; du] of the new nominal's stages from the old.
         inside: (N,) bool, stages to re-centre.
         X: (N+1, nx) or (N, nx) new stage start states; U: (N, nu) new controls.
+        values: (nx, N) the exact stage flows at the new nominal, if known (see
+            ``expand_dynamics``); the re-expanded stages take theirs.
     Returns:
         DA (nx, N) centred at (X[k], U[k]).
     """
     if not np.any(inside):
-        return expand_dynamics(problem, X[:problem.N], U, problem.stage_dt)
+        return expand_dynamics(problem, X[:problem.N], U, problem.stage_dt, values)
     c = np.empty_like(F.c)
     idx_in, idx_out = np.flatnonzero(inside), np.flatnonzero(~inside)
     c[..., idx_in] = da.shift(F[:, idx_in], dz[:, idx_in]).c
     if idx_out.size:
         c[..., idx_out] = expand_dynamics(problem, X[idx_out], U[idx_out],
-                                          problem.stage_dt[idx_out]).c
+                                          problem.stage_dt[idx_out],
+                                          None if values is None else values[:, idx_out]).c
     return da.DA(c, F.T)
 
 
@@ -181,10 +195,11 @@ class StageMaps:
         dz = np.concatenate([(X[:self.N] - self.X).T, (U - self.U).T])
         return dz, np.sqrt(np.sum(dz * dz, axis=0)) < self.radius
 
-    def at(self, problem, X: np.ndarray, U: np.ndarray):
-        """DA (nx, N) maps at (X[k], U[k]): re-centred inside the radius, expanded elsewhere."""
+    def at(self, problem, X: np.ndarray, U: np.ndarray, values=None):
+        """DA (nx, N) maps at (X[k], U[k]): re-centred inside the radius, expanded elsewhere
+        (``values``: as for ``maps_at``)."""
         dz, inside = self.deviation(X, U)
-        return maps_at(problem, self.F, dz, inside, X, U)
+        return maps_at(problem, self.F, dz, inside, X, U, values)
 
     def rollout(self, problem, U: np.ndarray) -> tuple[np.ndarray, int]:
         """Propagate U (N, nu) from problem.x0, evaluating a stage's map where the stage lies

@@ -185,8 +185,8 @@ def _stage_maps(problem, maps: StageMaps | None, X, U, fx):
     None: expand every stage. The constant part is then replaced by ``fx``, so the model's
     residual at Y is exact and only its derivatives carry the re-centring's truncation error.
     """
-    F = expand_dynamics(problem, X[:-1], U, problem.stage_dt) if maps is None \
-        else maps.at(problem, X, U)   # a new DA either way: its constant part is ours to set
+    F = expand_dynamics(problem, X[:-1], U, problem.stage_dt, values=fx) if maps is None \
+        else maps.at(problem, X, U, values=fx)   # a new DA either way: ours to change
     F.c[0] = fx
     return F
 
