@@ -443,17 +443,12 @@ def _mul(a: np.ndarray, b: np.ndarray, T: MonomialTables) -> np.ndarray:
         a, b = np.broadcast_to(a, shape), np.broadcast_to(b, shape)
     n = T.n
     if T.k == 2 and a[0].size > _SMALL_BATCH:
-        # Specialised order-2 kernel: constant / linear / quadratic blocks.
-        a0, b0 = a[0], b[0]
-        out = np.empty(a.shape)
-        np.multiply(a0, b0, out=out[0, ...])
-        lin = out[1:n + 1]
-        np.multiply(a[1:n + 1], b0, out=lin)
-        lin += a0 * b[1:n + 1]
-        quad = out[n + 1:]
-        np.multiply(a[n + 1:], b0, out=quad)
-        quad += a0 * b[n + 1:]
-        quad += _outer_sym(a[1:n + 1], b[1:n + 1], T)
+        # Specialised order-2 kernel: a b0 + a0 b is right in every block but the constant
+        # (2 a0 b0, halved), and the quadratic block gains the product of the linear parts.
+        out = a * b[0]
+        out += a[0] * b
+        out[0] *= 0.5
+        out[n + 1:] += _outer_sym(a[1:n + 1], b[1:n + 1], T)
         return out
     if T.k == 1 and a[0].size > _SMALL_BATCH:
         out = np.empty(a.shape)

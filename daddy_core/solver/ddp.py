@@ -103,53 +103,75 @@ def _regularised_inverse(Quu: np.ndarray, rho: float) -> np.ndarray | None:
     return Linv.T @ Linv
 
 
+def _bordered(grad: np.ndarray, hess: np.ndarray) -> np.ndarray:
+    """[[hess, grad], [grad^T, 0]] (..., m+1, m+1): the quadratic v(d) = grad.d + d^T hess d / 2
+    as one symmetric matrix, (d, 1)^T B (d, 1) = 2 v(d). Compositions of such quadratics with
+    affine maps are then single matrix products (one numpy call instead of several per stage)."""
+    m = grad.shape[-1]
+    B = np.zeros(grad.shape[:-1] + (m + 1, m + 1))
+    B[..., :m, :m] = hess
+    B[..., :m, m] = grad
+    B[..., m, :m] = grad
+    return B
+
+
 def backward_sweep(st: Stages, sweep: str, rho: float) -> Gains | None:
-    """One backward sweep; returns None when Q_uu + rho I is not positive definite."""
+    """One backward sweep; returns None when Q_uu + rho I is not positive definite.
+
+    Cost-to-go and Q are carried as bordered matrices (``_bordered``): V_k = [[V_xx, V_x],
+    [V_x^T, .]] (nx+1), Q_k = [[Q_zz, Q_z], [Q_z^T, .]] (n+1), z = [dx, du]. Then eq. 3 (without
+    dynamics Hessians) is Q_k = L_k + Jb^T V_k+1 Jb with Jb = diag(f_z, 1), and the cost-to-go
+    of the feedback du = a + b dx (eq. 4-5) is V_k = G^T Q_k G with G = [[I, 0], [b, a], [0, 1]]:
+    the same V_x, V_xx as the textbook expansion, in a handful of numpy calls per stage.
+    """
     p = st.problem
     nx, nu, N = p.nx, p.nu, p.N
+    n = nx + nu
     fz = np.moveaxis(st.F.gradient(), 1, 0)  # (N, nx, n)
     fzz = np.moveaxis(st.F.hessian(), 1, 0) if sweep == "hess" else None
-    Vx, Vxx = st.phix.copy(), st.phixx.copy()
+    L = _bordered(st.lz, st.lzz)                           # (N, n+1, n+1)
+    Jb = np.zeros((N, nx + 1, n + 1))
+    Jb[:, :nx, :n] = fz
+    Jb[:, nx, n] = 1.0
+    Vb = _bordered(st.phix, st.phixx)
+    G = np.zeros((n + 1, nx + 1))
+    G[:nx, :nx] = np.eye(nx)
+    G[n, nx] = 1.0
     a = np.zeros((N, nu))
     b = np.zeros((N, nu, nx))
     dv1 = dv2 = 0.0
     for k in range(N - 1, -1, -1):
-        J = fz[k]
-        Qz = st.lz[k] + J.T @ Vx                           # eq. 3, first-order terms
-        Qzz_gn = st.lzz[k] + J.T @ (Vxx @ J)               # eq. 3 without dynamics Hessians
-        Qzz = Qzz_gn
+        Qb_gn = L[k] + Jb[k].T @ Vb @ Jb[k]                # eq. 3 without dynamics Hessians
+        Qb = Qb_gn
         if sweep == "q":
             # Alg. 10: P_Q = P_l + P_V(P_f - x_{k+1}); derivatives read from its coefficients
-            pq = da.compose(_quadratic_da(Vx, Vxx), st.F[:, k] - st.X[k + 1])
-            Qz = st.lz[k] + pq.gradient()
-            Qzz = st.lzz[k] + pq.hessian()
+            pq = da.compose(_quadratic_da(Vb[:nx, nx], Vb[:nx, :nx]), st.F[:, k] - st.X[k + 1])
+            Qb = L[k] + _bordered(pq.gradient(), pq.hessian())
         elif fzz is not None:                              # Alg. 9: + sum_i V_x^i f^i_zz
-            Qzz = Qzz_gn + np.tensordot(Vx, fzz[k], axes=(0, 0))
-        Qx, Qu = Qz[:nx], Qz[nx:]
-        Minv = _regularised_inverse(Qzz[nx:, nx:], rho)
-        if Minv is None and Qzz is not Qzz_gn:
+            Qb = Qb_gn.copy()
+            Qb[:n, :n] += np.tensordot(Vb[:nx, nx], fzz[k], axes=(0, 0))
+        Minv = _regularised_inverse(Qb[nx:n, nx:n], rho)
+        if Minv is None and Qb is not Qb_gn:
             # the dynamics-Hessian terms make Q_uu indefinite at this stage (e.g. the mass-flow
             # term |u| near zero thrust): use the Gauss-Newton Q of this stage instead
-            Qzz = Qzz_gn
-            Minv = _regularised_inverse(Qzz[nx:, nx:], rho)
+            Qb = Qb_gn
+            Minv = _regularised_inverse(Qb[nx:n, nx:n], rho)
         if Minv is None:
             return None
-        Qxx, Qux, Quu = Qzz[:nx, :nx], Qzz[nx:, :nx], Qzz[nx:, nx:]
-        ak, bk = -(Minv @ Qu), -(Minv @ Qux)               # eq. 4-5
+        K = Minv @ Qb[nx:n]                                # (nu, n+1): -[b_k, ., a_k]
+        bk, ak = -K[:, :nx], -K[:, n]                      # eq. 4-5
         a[k], b[k] = ak, bk
-        Quu_a = Quu @ ak
+        Qu, Quu = Qb[nx:n, n], Qb[nx:n, nx:n]
         dv1 += ak @ Qu
-        dv2 += 0.5 * ak @ Quu_a
+        dv2 += 0.5 * ak @ (Quu @ ak)
         if sweep == "q":
             # Alg. 10: P_V,k = P_Q,k(dx, a_k + b_k dx)
-            pv = da.compose(_quadratic_da(Qz, Qzz), _feedback_map(ak, bk))
-            Vx, Vxx = pv.gradient(), pv.hessian()
+            pv = da.compose(_quadratic_da(Qb[:n, n], Qb[:n, :n]), _feedback_map(ak, bk))
+            Vb = _bordered(pv.gradient(), pv.hessian())
         else:
-            # V_x = Q_x + b^T Q_uu a + b^T Q_u + Q_ux^T a; V_xx = Q_xx + b^T Q_uu b + b^T Q_ux
-            # + Q_ux^T b, with the Q_uu products shared
-            Vx = Qx + bk.T @ (Quu_a + Qu) + Qux.T @ ak
-            Vxx = Qxx + bk.T @ (Quu @ bk + Qux) + Qux.T @ bk
-            Vxx = 0.5 * (Vxx + Vxx.T)
+            G[nx:n, :nx], G[nx:n, nx] = bk, ak
+            Vb = G.T @ Qb @ G
+            Vb = 0.5 * (Vb + Vb.T)
     return Gains(a, b, float(dv1), float(dv2))
 
 
