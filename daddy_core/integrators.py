@@ -231,9 +231,10 @@ def _rk78_single(rhs, x, u, t0, dt, tol, h0, max_steps, stats):
                     xi[m] += ah * kj[m]
             K[i] = np.asarray(rhs(t + _RK78_CS[i] * hs, state(xi), uu), dtype=float).tolist()
         k0, k10, k11, k12 = K[0], K[10], K[11], K[12]
-        err = max([abs(k0[m] + k10[m] - k11[m] - k12[m]) for m in idx]) * (RK78_ERR * abs(hs))
-        if not math.isfinite(err):
+        errs = [abs(k0[m] + k10[m] - k11[m] - k12[m]) for m in idx]
+        if not math.isfinite(sum(errs)):   # (Python's max may skip a NaN; a sum keeps it)
             raise DaddyError("rk78: dynamics returned NaN or inf")
+        err = max(errs) * (RK78_ERR * abs(hs))
         if err <= tol:
             x = list(x)
             for j, b in _RK78_WEIGHTS:

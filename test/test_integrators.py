@@ -109,6 +109,11 @@ def test_integrator_errors():
     rhs = lambda t, x, u: x * np.nan
     with pytest.raises(DaddyError, match="NaN"):
         rk78(rhs, np.ones(2), None, 0.0, 1.0)
+    # a NaN in the last component only, on the plain-Python paths (one state, a few states)
+    last_nan = lambda t, x, u: np.array([0.0, 1.0, np.nan])
+    for x, u in ((np.ones(3), np.zeros(1)), (np.ones((3, 2)), np.zeros((1, 2)))):
+        with pytest.raises(DaddyError, match="NaN"):
+            rk78(last_nan, x, u, 0.0, 1.0)
     with pytest.raises(DaddyError, match="steps"):
         rk4(rhs, np.ones(2), None, 0.0, 1.0, steps=0)
     with pytest.raises(DaddyError, match="tol"):
