@@ -172,6 +172,7 @@ def backward_sweep(st: Stages, sweep: str, rho: float) -> Gains | None:
             G[nx:n, :nx], G[nx:n, nx] = bk, ak
             Vb = G.T @ Qb @ G
             Vb = 0.5 * (Vb + Vb.T)
+            Vb[nx, nx] = 0.0   # the constant (expected change) is not carried: dv1, dv2 are
     return Gains(a, b, float(dv1), float(dv2))
 
 
