@@ -164,7 +164,7 @@ def flow_step(rhs, integrator: str = "rk78", tol: float = 1e-13, rk4_steps: int 
             # every integration first tries the whole stage (h0 = dt): measured on the nominal
             # plans' stages at tol 1e-13, halo 1.6 steps per stage instead of 3.2 with rk78's
             # default dt / 8, Earth-Mars 2.9 instead of 3.3
-            if dtol > tol and isinstance(x, DA):
+            if isinstance(x, DA) and (dtol > tol or values is not None):
                 F = rk78(rhs, x, u, 0.0, dt, tol=dtol, h0=dt)
                 F.c[0] = rk78(rhs, x.cons, dm.cons(u), 0.0, dt, tol=tol, h0=dt) \
                     if values is None else values

@@ -118,3 +118,19 @@ def test_integrator_errors():
         rk4(rhs, np.ones(2), None, 0.0, 1.0, steps=0)
     with pytest.raises(DaddyError, match="tol"):
         rk78(rhs, np.ones(2), None, 0.0, 1.0, tol=0)
+
+
+@pytest.mark.parametrize("derivative_tol", [None, 1e-8])
+def test_flow_step_takes_given_values_as_constant_part(derivative_tol):
+    """A DA expansion given the flows already integrated keeps them as its constant part,
+    whatever the derivative tolerance; its derivatives are those of the plain expansion."""
+    from daddy_core import da
+    from daddy_core.problem import flow_step
+    case = load_case("earth_mars")
+    step = flow_step(case.rhs(), derivative_tol=derivative_tol)
+    z = da.variables(np.concatenate([case.x0, [1e-3, 0.0, 0.0]])[:, None], order=2)
+    dt = np.array([case.tof / 40])
+    plain = step(z[:7], z[7:], dt)
+    given = step(z[:7], z[7:], dt, values=plain.cons + 1.0)
+    np.testing.assert_array_equal(given.cons, plain.cons + 1.0)
+    np.testing.assert_array_equal(given.gradient(), plain.gradient())
