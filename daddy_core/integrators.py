@@ -12,6 +12,7 @@ integrate in one call.
 """
 from __future__ import annotations
 
+import functools
 import math
 from fractions import Fraction as F
 
@@ -194,13 +195,45 @@ def rk78(rhs, x, u, t0, dt, tol: float = 1e-13, h0=None, max_steps: int = 10_000
 # the nonzero (j, a_ij) of each row and (j, b_j) of the 8th-order weights, as Python floats
 _RK78_ROWS = [[(j, a) for j, a in enumerate(row) if a != 0.0] for row in RK78_A]
 _RK78_WEIGHTS = [(j, float(b)) for j, b in enumerate(RK78_B) if b != 0.0]
-_RK78_CS = [float(c) for c in RK78_C]
+
+
+@functools.lru_cache(maxsize=None)
+def _single_step(nx: int):
+    """One RK78 step of an nx-component state in plain Python floats, generated as straight-line
+    code: ``step(rhs, state, t, x, u, hs) -> (x_new, err)`` with x, x_new lists of nx floats, err
+    the scaled error estimate (raises on a non-finite one). Unrolled, the ~60 combinations
+    x + h sum_j a_ij k_j of a step cost local-variable arithmetic only (a loop over lists cost 3x);
+    the operations and their order are those of the batched path's a_ij h k_j sums."""
+    comps = range(nx)
+
+    def combo(prefix, rows, m):   # x_m + (c_j h) k_j,m + ... evaluated left to right
+        return " + ".join([f"x{m}"] + [f"{prefix}{j} * k{j}_{m}" for j, _ in rows])
+
+    body = [f"x{m} = x[{m}]" for m in comps]
+    body.append(f"{', '.join(f'k0_{m}' for m in comps)}, = _floats(rhs(t, state(x), u))")
+    for i in range(1, 13):
+        body += [f"a{i}_{j} = {a!r} * hs" for j, a in _RK78_ROWS[i]]
+        xi = ", ".join(combo(f"a{i}_", _RK78_ROWS[i], m) for m in comps)
+        body.append(f"{', '.join(f'k{i}_{m}' for m in comps)}, = "
+                    f"_floats(rhs(t + {float(RK78_C[i])!r} * hs, state([{xi}]), u))")
+    body += [f"e{m} = abs(k0_{m} + k10_{m} - k11_{m} - k12_{m})" for m in comps]
+    body.append(f"if not _isfinite({' + '.join(f'e{m}' for m in comps)}):")
+    body.append('    raise DaddyError("rk78: dynamics returned NaN or inf")')
+    body += [f"b{j} = {b!r} * hs" for j, b in _RK78_WEIGHTS]
+    xn = ", ".join(combo("b", _RK78_WEIGHTS, m) for m in comps)
+    body.append(f"return [{xn}], max({', '.join(f'e{m}' for m in comps)}, 0.0) "
+                f"* ({RK78_ERR!r} * abs(hs))")
+    src = "def step(rhs, state, t, x, u, hs):\n" + "".join(f"    {ln}\n" for ln in body)
+    namespace = {"_floats": lambda v: np.asarray(v, dtype=float).tolist(),
+                 "_isfinite": math.isfinite, "DaddyError": DaddyError}
+    exec(compile(src, f"<rk78 step, nx={nx}>", "exec"), namespace)
+    return namespace["step"]
 
 
 def _rk78_single(rhs, x, u, t0, dt, tol, h0, max_steps, stats):
     """RK78 for one float state: same scheme and step control as the batched path, in plain
     Python floats (the Std/Dyn forward passes integrate one 7-component state at a time, where
-    every numpy call is overhead: x + h sum_j a_ij k_j is ~60 float operations).
+    every numpy call is overhead), one generated straight-line step (``_single_step``).
 
     A right-hand side flagged ``rhs.scalar_components = True`` (it reads x and u only by integer
     index, like the catalogue models) receives lists of Python floats, whose arithmetic costs a
@@ -209,38 +242,28 @@ def _rk78_single(rhs, x, u, t0, dt, tol, h0, max_steps, stats):
     state = list if scalar else np.array
     uu = [float(v) for v in u] if scalar else u
     x = [float(v) for v in x]
-    idx = range(len(x))
+    step = _single_step(len(x))
     t, t_end = t0, t0 + dt
     direction = 1.0 if dt >= 0 else -1.0
     h = abs(dt) / 8.0 if h0 is None else abs(float(h0))
     if h == 0.0:
         return np.array(x)
-    K = [None] * 13
     n_steps = 0
     while abs(t_end - t) > 1e-15 * max(1.0, abs(t_end)):
         n_steps += 1
         if n_steps > max_steps:
             raise DaddyError(f"rk78 exceeded max_steps={max_steps} (stiff or singular dynamics?)")
         hs = min(h, abs(t_end - t)) * direction
-        K[0] = np.asarray(rhs(t, state(x), uu), dtype=float).tolist()
-        for i in range(1, 13):
-            xi = list(x)
-            for j, a in _RK78_ROWS[i]:
-                kj, ah = K[j], a * hs
-                for m in idx:
-                    xi[m] += ah * kj[m]
-            K[i] = np.asarray(rhs(t + _RK78_CS[i] * hs, state(xi), uu), dtype=float).tolist()
-        k0, k10, k11, k12 = K[0], K[10], K[11], K[12]
-        errs = [abs(k0[m] + k10[m] - k11[m] - k12[m]) for m in idx]
-        if not math.isfinite(sum(errs)):   # (Python's max may skip a NaN; a sum keeps it)
-            raise DaddyError("rk78: dynamics returned NaN or inf")
-        err = max(errs) * (RK78_ERR * abs(hs))
+        try:
+            x_new, err = step(rhs, state, t, x, uu, hs)
+        except ValueError as exc:   # the rhs's own error, or it returned the wrong length
+            n_out = np.size(rhs(t, state(x), uu))
+            if n_out != len(x):
+                raise DaddyError(f"rk78: rhs returned {n_out} components for a state of "
+                                 f"{len(x)} components") from exc
+            raise
         if err <= tol:
-            x = list(x)
-            for j, b in _RK78_WEIGHTS:
-                kj, bh = K[j], b * hs
-                for m in idx:
-                    x[m] += bh * kj[m]
+            x = x_new
             t += hs
         h = abs(hs) * min(5.0, max(0.2, 0.8 * (tol / max(err, 1e-300)) ** 0.125))
     if stats is not None:

@@ -114,6 +114,8 @@ def test_integrator_errors():
     for x, u in ((np.ones(3), np.zeros(1)), (np.ones((3, 2)), np.zeros((1, 2)))):
         with pytest.raises(DaddyError, match="NaN"):
             rk78(last_nan, x, u, 0.0, 1.0)
+    with pytest.raises(DaddyError, match="4 components for a state of 3"):
+        rk78(lambda t, x, u: np.ones(4), np.ones(3), np.zeros(1), 0.0, 1.0)
     with pytest.raises(DaddyError, match="steps"):
         rk4(rhs, np.ones(2), None, 0.0, 1.0, steps=0)
     with pytest.raises(DaddyError, match="tol"):
