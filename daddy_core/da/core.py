@@ -64,9 +64,11 @@ class DA:
         return f"DA(n={self.n}, order={self.order}, shape={self.shape})"
 
     def __getitem__(self, key) -> "DA":
+        if type(key) is int:   # the common case in dynamics: x[0]
+            return _wrap(self.c[:, key], self.T)
         if not isinstance(key, tuple):
             key = (key,)
-        return DA(self.c[(slice(None),) + key], self.T)
+        return _wrap(self.c[(slice(None),) + key], self.T)
 
     def __iter__(self):
         for i in range(len(self)):
@@ -131,7 +133,7 @@ class DA:
 
     # ------------------------------------------------------------------ arithmetic
     def __neg__(self) -> "DA":
-        return DA(-self.c, self.T)
+        return _wrap(-self.c, self.T)
 
     def __pos__(self) -> "DA":
         return self
@@ -140,11 +142,11 @@ class DA:
         if isinstance(other, DA):
             self._check(other)
             a, b = _align(self.c, other.c)
-            return DA(a + b, self.T)
+            return _wrap(a + b, self.T)
         other = _as_array(other, "addend")
         c = _broadcast_coeffs(self.c, other)
         c[0] += other
-        return DA(c, self.T)
+        return _wrap(c, self.T)
 
     __radd__ = __add__
 
@@ -152,24 +154,24 @@ class DA:
         if isinstance(other, DA):
             self._check(other)
             a, b = _align(self.c, other.c)
-            return DA(a - b, self.T)
+            return _wrap(a - b, self.T)
         other = _as_array(other, "subtrahend")
         c = _broadcast_coeffs(self.c, other)
         c[0] -= other
-        return DA(c, self.T)
+        return _wrap(c, self.T)
 
     def __rsub__(self, other) -> "DA":
         other = _as_array(other, "minuend")
         c = -_broadcast_coeffs(self.c, other)
         c[0] += other
-        return DA(c, self.T)
+        return _wrap(c, self.T)
 
     def __mul__(self, other) -> "DA":
         if isinstance(other, DA):
             self._check(other)
-            return DA(_mul(self.c, other.c, self.T), self.T)
+            return _wrap(_mul(self.c, other.c, self.T), self.T)
         other = _as_array(other, "factor")
-        return DA(_scale(self.c, other), self.T)
+        return _wrap(_scale(self.c, other), self.T)
 
     __rmul__ = __mul__
 
@@ -235,11 +237,15 @@ class DA:
             out[0] = derivs[0]
             return DA(out, T)
         if k == 2:
+            # f0 + f1 d + f2 d^2: d^2's coefficients are a_i a_j, doubled off the diagonal
+            # (the doubling is folded into f2, exactly: a power of two)
             n = T.n
-            out = self.c * derivs[1]
+            c = self.c
+            out = c * derivs[1]
             out[0] = derivs[0]
-            out[n + 1:] += _outer_sym(self.c[1:n + 1], self.c[1:n + 1], T) * derivs[2]
-            return DA(out, T)
+            a1 = c[1:n + 1]
+            out[n + 1:] += a1[T.triu_i] * a1[T.triu_j] * _times_offdiag2(derivs[2], T, c.ndim - 1)
+            return _wrap(out, T)
         d = self._nilpotent()
         r = _constant_like(d, 0.0) + 0.0
         r[0] = derivs[k]
@@ -330,6 +336,25 @@ def _atan_nilpotent(z: DA) -> DA:
     for j in range(1, z.order + 1):
         derivs.append(np.full(z.shape, 0.0 if j % 2 == 0 else (-1.0) ** ((j - 1) // 2) / j))
     return z.series(derivs)
+
+
+_new = object.__new__
+
+
+def _wrap(c: np.ndarray, tab: MonomialTables) -> DA:
+    """A DA around coefficients the kernels just built (a float array with leading axis
+    ``tab.size``), without the public constructor's checks (a third of its cost)."""
+    d = _new(DA)
+    d.c = c
+    d.T = tab
+    return d
+
+
+def _times_offdiag2(f, T: MonomialTables, ndim: int) -> np.ndarray:
+    """f (broadcastable to a batch shape of ``ndim`` axes) times 2 on the off-diagonal degree-2
+    monomials, 1 on the diagonal: shape (n(n+1)/2, *batch) up to broadcasting."""
+    f = np.asarray(f, dtype=float)
+    return T.sym_factor.reshape((-1,) + (1,) * max(ndim, f.ndim)) * f
 
 
 # ---------------------------------------------------------------------- constructors

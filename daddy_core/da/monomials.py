@@ -40,6 +40,8 @@ class MonomialTables:
         pair_starts: (M,) start of each target's run in the pair arrays.
         triu_i, triu_j: (n(n+1)/2,) the variable pair of each degree-2 monomial.
         offdiag: (n(n+1)/2,) True where triu_i != triu_j.
+        outer_a, outer_b: rows of a flattened outer product summing to each degree-2 product.
+        sym_factor: (n(n+1)/2,) 2.0 off the diagonal, 1.0 on it.
         factorial: (M,) product of factorials of the exponents (coefficient -> derivative factor).
     """
 
@@ -61,6 +63,7 @@ class MonomialTables:
     factorial: np.ndarray
     outer_a: np.ndarray
     outer_b: np.ndarray
+    sym_factor: np.ndarray
 
 
 @functools.lru_cache(maxsize=64)
@@ -112,4 +115,6 @@ def tables(n: int, k: int) -> MonomialTables:
         # rows of the flattened outer product a1 (x) b1 (n*n rows + one zero row at n*n) whose
         # sum gives each degree-2 coefficient: (i, j) and (j, i) off the diagonal, (i, i) once.
         outer_a=ti * n + tj, outer_b=np.where(ti != tj, tj * n + ti, n * n),
+        # (n(n+1)/2,) 2 off the diagonal, 1 on it: (a1 . dx)^2 has coefficients sym_factor a_i a_j
+        sym_factor=np.where(ti != tj, 2.0, 1.0),
     )
