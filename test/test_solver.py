@@ -187,3 +187,21 @@ def test_options_are_validated():
         SolverOptions(tol_ddp=-1.0)
     with pytest.raises(DaddyError, match="homotopy"):
         SolverOptions(homotopy=((2.0, 0.1),))
+
+
+@pytest.mark.parametrize("nu", [1, 2, 3, 4])
+def test_regularised_inverse_matches_numpy_and_rejects_indefinite(nu):
+    """The Q_uu + rho I inverse of the backward sweep (plain Python; unrolled for nu = 3)."""
+    from daddy_core.solver.ddp import _regularised_inverse
+    rng = np.random.default_rng(nu)
+    for _ in range(50):
+        M = rng.normal(size=(nu, nu))
+        Q = M @ M.T
+        rho = 1e-3
+        np.testing.assert_allclose(_regularised_inverse(Q, rho), np.linalg.inv(Q + rho * np.eye(nu)),
+                                   rtol=1e-9, atol=0)
+    indefinite = np.eye(nu)
+    indefinite[-1, -1] = -1.0
+    assert _regularised_inverse(indefinite, 0.5) is None
+    assert _regularised_inverse(indefinite, 1.5) is not None
+    assert _regularised_inverse(np.full((nu, nu), np.nan), 1.0) is None
