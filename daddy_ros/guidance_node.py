@@ -49,7 +49,8 @@ PARAMETERS = {  # name: (default, description)
     "polish": (True, "Newton polishing after each re-optimisation"),
     "fuel_optimal": (True, "fuel-optimal cost (else energy-optimal)"),
     "stages": (0, "stage count of the scenario (0: the case's own)"),
-    "tol_aul": (0.0, "augmented-Lagrangian tolerance (0: the case's own)"),
+    "tol_aul": (0.0, "augmented-Lagrangian tolerance (0: the case's own for cold solves, 1e-5 "
+                     "for polished warm re-optimisations, which Newton then takes to tol_newton)"),
     "tol_newton": (0.0, "Newton polishing tolerance (0: the case's own)"),
     "time_budget_s": (60.0, "wall-clock budget of one re-optimisation [s]"),
     "restore_first": (True, "restore feasibility of the warm start by Newton before DDP, so a "
