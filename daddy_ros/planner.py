@@ -338,6 +338,10 @@ class GuidancePlanner:
             opts = self.options
         else:
             opts = self.replan_options
+            if problem.N <= MIN_STAGES_LEFT:
+                # the last stages (arrival phase, re-gridded): the full AUL tolerance; their
+                # best-effort plans (infeasible targets) are DDP's, not Newton's
+                opts = opts.with_(tol_aul=self.options.tol_aul)
             # the current plan may already fly above the derating: start from the lowest rating
             # it keeps to instead of failing on the bounds below first
             rung = self._rung_for(U_guess)
