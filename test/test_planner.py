@@ -199,3 +199,33 @@ def test_message_conversions_round_trip(planner):
     assert starts[0] == 0.0
     assert starts[1] == pytest.approx(plan.stage_dt_s[:2].sum() - 1.5 * plan.stage_dt_s[0],
                                       abs=1e-6)
+
+
+def test_warm_replans_loosen_the_aul_tolerance_except_in_the_arrival_phase(monkeypatch):
+    """Polished warm re-plans stop the AUL at WARM_TOL_AUL (Newton finishes the constraints),
+    the arrival phase and an explicit tol_aul keep theirs, and without polishing nothing
+    changes."""
+    import daddy_ros.planner as planner_mod
+    from daddy_ros.planner import WARM_TOL_AUL
+    pl = GuidancePlanner("earth_mars")
+    case_tol = pl.options.tol_aul
+    assert case_tol < WARM_TOL_AUL and pl.replan_options.tol_aul == WARM_TOL_AUL
+    assert GuidancePlanner("earth_mars", tol_aul=2e-6).replan_options.tol_aul == 2e-6
+    assert GuidancePlanner("earth_mars", polish=False).replan_options.tol_aul == case_tol
+    seen = []
+    real_solve = planner_mod.solve
+
+    def recording_solve(problem, *args, **kw):
+        seen.append((problem.N, kw["options"].tol_aul))
+        return real_solve(problem, *args, **kw)
+
+    monkeypatch.setattr(planner_mod, "solve", recording_solve)
+    plan = pl.load_plan(PLANS_DIR / "earth_mars_fuel.json", T0_S)
+    for k in (10, len(plan.stage_dt_s) - 2):            # mid-course, then the arrival phase
+        t = plan.epoch_s + np.sum(plan.stage_dt_s[:k])
+        s = plan.states_si[k]
+        seen.clear()
+        out = pl.replan(s[:3] + 1e5, s[3:6], s[6], t, f"k{k}", now_s=t)
+        assert out.ok, out.reason
+        assert seen[0] == ((len(plan.stage_dt_s) - k, WARM_TOL_AUL) if k == 10
+                           else (MIN_STAGES_LEFT, case_tol))
