@@ -39,6 +39,11 @@ class SolverOptions:
         restore_warm_start: before DDP, drive the initial guess to feasibility with the Newton
             polishing (Alg. 11); if DDP does not converge (e.g. the time budget), the solve
             returns that feasible iterate (converged=False, with the reason).
+        polish_from_ddp_maps: start the Newton polishing from the DDP's last stage maps
+            (re-centred where the step stays inside their radius; every stage expanded afresh
+            once the exact residual stalls) instead of expanding every stage. Off by default:
+            in the closed loop, arrival-phase plans polished this way missed by up to 1.39 cm/s
+            (0.11 cm/s from fresh expansions); warm re-plans use it before the arrival phase.
         ddp_max_iter, aul_max_iter, newton_max_iter: iteration bounds.
         lambda_max, mu_init, mu_max, mu_growth: multiplier bound and penalty schedule.
         newton_cv_ratio: the polishing's convergence-rate threshold (eps_CV, paper Alg. 5).
@@ -64,6 +69,7 @@ class SolverOptions:
     short_step_rho_growth: float = 10.0
     carry_rho: bool = False
     restore_warm_start: bool = False
+    polish_from_ddp_maps: bool = False
     ddp_max_iter: int = 200
     ddp_min_iter: int = 3
     aul_max_iter: int = 40
@@ -82,7 +88,8 @@ class SolverOptions:
     def __post_init__(self):
         for f in fields(self):
             v = getattr(self, f.name)
-            if f.name in ("homotopy", "verbose", "time_budget_s", "carry_rho", "restore_warm_start"):
+            if f.name in ("homotopy", "verbose", "time_budget_s", "carry_rho", "restore_warm_start",
+                          "polish_from_ddp_maps"):
                 continue
             if not isinstance(v, (int, float)) or v != v or v < 0:
                 raise DaddyError(f"options.{f.name} must be a non-negative number, got {v!r}")

@@ -219,9 +219,10 @@ def solve(problem, u_guess=None, method: str = "dyn", fuel_optimal: bool | None 
     newton_iters, t_newton = restore_iters, 0.0
     if polish and not fallback:
         t0 = time.perf_counter()
-        # fresh expansions first: the Dyn pass's maps, re-centred again and again, carry
-        # derivative errors that stalled the polishing (measured on the halo re-plans)
-        pres = newton_polish(problem, X, U, opts, deadline)
+        # fresh expansions first unless asked otherwise: the Dyn pass's maps, re-centred again
+        # and again, carry derivative errors (see SolverOptions.polish_from_ddp_maps)
+        pres = newton_polish(problem, X, U, opts, deadline,
+                             maps=final_maps if opts.polish_from_ddp_maps else None)
         t_newton = time.perf_counter() - t0
         newton_iters += pres.iterations
         if progress:
