@@ -202,8 +202,9 @@ def test_message_conversions_round_trip(planner):
 
 
 def test_warm_replans_loosen_the_aul_tolerance_except_in_the_arrival_phase(monkeypatch):
-    """Polished warm re-plans stop the AUL at WARM_TOL_AUL (Newton finishes the constraints),
-    the arrival phase and an explicit tol_aul keep theirs, and without polishing nothing
+    """Polished warm re-plans stop the AUL at WARM_TOL_AUL (Newton finishes the constraints)
+    and polish from the DDP's maps; the arrival phase keeps the case's tolerance and fresh
+    expansions, an explicit tol_aul applies throughout, and without polishing nothing
     changes."""
     import daddy_ros.planner as planner_mod
     from daddy_ros.planner import WARM_TOL_AUL
@@ -216,7 +217,7 @@ def test_warm_replans_loosen_the_aul_tolerance_except_in_the_arrival_phase(monke
     real_solve = planner_mod.solve
 
     def recording_solve(problem, *args, **kw):
-        seen.append((problem.N, kw["options"].tol_aul))
+        seen.append((problem.N, kw["options"].tol_aul, kw["options"].polish_from_ddp_maps))
         return real_solve(problem, *args, **kw)
 
     monkeypatch.setattr(planner_mod, "solve", recording_solve)
@@ -227,5 +228,6 @@ def test_warm_replans_loosen_the_aul_tolerance_except_in_the_arrival_phase(monke
         seen.clear()
         out = pl.replan(s[:3] + 1e5, s[3:6], s[6], t, f"k{k}", now_s=t)
         assert out.ok, out.reason
-        assert seen[0] == ((len(plan.stage_dt_s) - k, WARM_TOL_AUL) if k == 10
-                           else (MIN_STAGES_LEFT, case_tol))
+        assert seen[0] == ((len(plan.stage_dt_s) - k, WARM_TOL_AUL, True) if k == 10
+                           else (MIN_STAGES_LEFT, case_tol, False))
+        assert out.plan.solution.max_violation <= 1e-9
