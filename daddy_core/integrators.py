@@ -202,8 +202,8 @@ def _single_step(nx: int):
     """One RK78 step of an nx-component state in plain Python floats, generated as straight-line
     code: ``step(rhs, state, t, x, u, hs) -> (x_new, err)`` with x, x_new lists of nx floats, err
     the scaled error estimate (raises on a non-finite one). Unrolled, the ~60 combinations
-    x + h sum_j a_ij k_j of a step cost local-variable arithmetic only (a loop over lists cost 3x);
-    the operations and their order are those of the batched path's a_ij h k_j sums."""
+    x + (a_ij h) k_j of a step cost local-variable arithmetic only (~30 us a step here; loops over
+    lists cost ~75 us), summed left to right in j as the loops did (bit-identical results)."""
     comps = range(nx)
 
     def combo(prefix, rows, m):   # x_m + (c_j h) k_j,m + ... evaluated left to right

@@ -207,11 +207,11 @@ def backward_sweep(st: Stages, sweep: str, rho: float) -> Gains | None:
             Vb = G.T @ Qb @ G
             Vb = Vb + Vb.T
             Vb *= 0.5
-            Vb[nx, nx] = 0.0   # the constant (expected change) is not carried: dv1, dv2 are
+            Vb[nx, nx] = 0.0   # the constant (expected change) is not carried: dv1, dv2
     a, b = -K[:, :, n], -K[:, :, :nx]
     Qu, Quu = Qu_rows[:, :, n], Qu_rows[:, :, nx:n]
     dv1 = np.einsum("ki,ki->", a, Qu)                       # sum_k a_k . Q_u,k
-    dv2 = 0.5 * np.einsum("ki,ki->", a, np.einsum("kij,kj->ki", Quu, a))
+    dv2 = 0.5 * np.einsum("ki,ki->", a, np.einsum("kij,kj->ki", Quu, a))   # sum a.Q_uu.a / 2
     return Gains(a, b, float(dv1), float(dv2))
 
 
