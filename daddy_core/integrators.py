@@ -80,6 +80,14 @@ class _Stages:
         return DA(out, self.T) if self.is_da else out
 
 
+def prepared_control(rhs, u):
+    """``rhs.prepare_control(u)`` if the right-hand side declares one, else u: what depends on
+    the control only (constant over an integration) is computed once, not at every stage (the
+    catalogue models append the thrust magnitude, ``models.with_thrust_magnitude``)."""
+    prepare = getattr(rhs, "prepare_control", None)
+    return u if prepare is None or u is None else prepare(u)
+
+
 _RK4_A = [[], [0.5], [0.0, 0.5], [0.0, 0.0, 1.0]]
 _RK4_B = [1 / 6, 1 / 3, 1 / 3, 1 / 6]
 
@@ -99,6 +107,7 @@ def rk4(rhs, x, u, t0, dt, steps: int = 20):
     """
     if steps < 1:
         raise DaddyError(f"rk4 steps must be >= 1, got {steps}")
+    u = prepared_control(rhs, u)
     h = np.asarray(dt, dtype=float) / steps
     t = np.asarray(t0, dtype=float)
     for _ in range(steps):
@@ -134,6 +143,7 @@ def rk78(rhs, x, u, t0, dt, tol: float = 1e-13, h0=None, max_steps: int = 10_000
     """
     if not tol > 0:
         raise DaddyError(f"rk78 tol must be > 0, got {tol}")
+    u = prepared_control(rhs, u)
     real = (isinstance(x, np.ndarray) and x.dtype.kind == "f"
             and np.asarray(u).dtype.kind in "fiu")   # not DA, not complex (complex-step tests)
     if real and x.ndim == 1 and np.ndim(dt) == 0 and np.ndim(t0) == 0:

@@ -136,3 +136,31 @@ def test_flow_step_takes_given_values_as_constant_part(derivative_tol):
     given = step(z[:7], z[7:], dt, values=plain.cons + 1.0)
     np.testing.assert_array_equal(given.cons, plain.cons + 1.0)
     np.testing.assert_array_equal(given.gradient(), plain.gradient())
+
+
+@pytest.mark.parametrize("name", ["earth_mars", "halo_l2_l1", "leo_leo"])
+def test_prepared_control_changes_no_value(name):
+    """The catalogue models let the integrators append |u| to the control once per integration
+    (``rhs.prepare_control``): flows and DA expansions are bit-identical to recomputing it at
+    every stage, and the rhs takes either form of the control."""
+    from daddy_core import da
+
+    case = load_case(name)
+    rhs = case.rhs()
+    assert rhs.prepare_control is models.with_thrust_magnitude
+    u = np.array([0.3, -0.2, 0.1]) * (0.5 / case.units.thrust_unit_n)
+    u4 = models.with_thrust_magnitude(u)
+    assert u4.shape == (4,) and u4[3] == models.thrust_magnitude(u)
+    np.testing.assert_array_equal(rhs(0.0, case.x0, u4), rhs(0.0, case.x0, u))
+
+    def plain(t, x, uu):   # the same model without the attribute: |u| at every stage
+        return rhs(t, x, uu)
+    plain.scalar_components = True
+    T = case.tof / 40
+    for x, uu in ((case.x0, u), (np.stack([case.x0] * 3, axis=1), np.stack([u] * 3, axis=1))):
+        np.testing.assert_array_equal(rk78(rhs, x, uu, 0.0, T, h0=T),
+                                      rk78(plain, x, uu, 0.0, T, h0=T))
+    z = da.variables(np.concatenate([case.x0, u])[:, None], order=2)
+    a = rk78(rhs, z[:7], z[7:], 0.0, T, tol=1e-8, h0=T)
+    b = rk78(plain, z[:7], z[7:], 0.0, T, tol=1e-8, h0=T)
+    np.testing.assert_array_equal(a.c, b.c)

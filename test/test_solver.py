@@ -198,8 +198,8 @@ def test_regularised_inverse_matches_numpy_and_rejects_indefinite(nu):
         M = rng.normal(size=(nu, nu))
         Q = M @ M.T
         rho = 1e-3
-        np.testing.assert_allclose(_regularised_inverse(Q, rho), np.linalg.inv(Q + rho * np.eye(nu)),
-                                   rtol=1e-9, atol=0)
+        np.testing.assert_allclose(_regularised_inverse(Q, rho),
+                                   np.linalg.inv(Q + rho * np.eye(nu)), rtol=1e-9, atol=0)
     indefinite = np.eye(nu)
     indefinite[-1, -1] = -1.0
     assert _regularised_inverse(indefinite, 0.5) is None

@@ -23,6 +23,23 @@ def thrust_magnitude(u):
     return dm.sqrt(u[0] * u[0] + u[1] * u[1] + u[2] * u[2] + THRUST_FLOOR ** 2)
 
 
+def with_thrust_magnitude(u):
+    """The control with its regularised magnitude appended, [u_0, u_1, u_2, |u|] (4, *batch).
+
+    The right-hand sides below declare it as ``rhs.prepare_control``: the integrators call it
+    once per integration (the control is constant over a stage) and pass the result as u, so
+    the magnitude -- a quarter of a DA right-hand side's products and its square root -- is not
+    recomputed at each of RK78's 13 stages. The values are the same either way."""
+    if len(u) > 3:
+        return u
+    return dm.stack([u[0], u[1], u[2], thrust_magnitude(u)])
+
+
+def _magnitude(u):
+    """|u| of a control, prepared by ``with_thrust_magnitude`` or not."""
+    return u[3] if len(u) > 3 else thrust_magnitude(u)
+
+
 def double_integrator_step(x, u, dt):
     """Discrete double integrator (paper eq. 17) as the reference code steps it: explicit Euler.
 
@@ -41,8 +58,9 @@ def two_body(gm: float, exhaust_speed: float):
         k = (x[0] * x[0] + x[1] * x[1] + x[2] * x[2]) ** -1.5 * gm   # gm / r^3
         inv_m = 1.0 / x[6]
         return dm.stack([x[3], x[4], x[5], u[0] * inv_m - x[0] * k, u[1] * inv_m - x[1] * k,
-                         u[2] * inv_m - x[2] * k, thrust_magnitude(u) * inv_c])
+                         u[2] * inv_m - x[2] * k, _magnitude(u) * inv_c])
     rhs.scalar_components = True   # reads x, u by index only: the RK78 may pass float lists
+    rhs.prepare_control = with_thrust_magnitude   # |u| once per integration
     return rhs
 
 
@@ -68,8 +86,9 @@ def cr3bp(mu: float, exhaust_speed: float):
         ax = x[4] * 2.0 + px - d1 * k1 - d2 * k2 + u[0] * inv_m
         ay = x[3] * -2.0 + py - py * ksum + u[1] * inv_m
         az = u[2] * inv_m - pz * ksum
-        return dm.stack([x[3], x[4], x[5], ax, ay, az, thrust_magnitude(u) * inv_c])
+        return dm.stack([x[3], x[4], x[5], ax, ay, az, _magnitude(u) * inv_c])
     rhs.scalar_components = True
+    rhs.prepare_control = with_thrust_magnitude
     return rhs
 
 
@@ -100,8 +119,9 @@ def equinoctial(gm: float, exhaust_speed: float):
         dr = B * sam * g * sL * inv_psi * fn * 0.5
         ds = B * sam * g * cL * inv_psi * fn * 0.5
         dL = psi * psi / (B * B * B * a * sam) - B * sam * inv_psi * rc * fn
-        return dm.stack([da_, dp, dq, dr, ds, dL, thrust_magnitude(u) * (-1.0 / exhaust_speed)])
+        return dm.stack([da_, dp, dq, dr, ds, dL, _magnitude(u) * (-1.0 / exhaust_speed)])
     rhs.scalar_components = True
+    rhs.prepare_control = with_thrust_magnitude
     return rhs
 
 

@@ -8,6 +8,7 @@ import numpy as np
 from scipy.integrate import solve_ivp
 
 from ..errors import DaddyError
+from ..integrators import prepared_control
 from .aul import aul
 from .ddp import DDPStats
 from .expansion import Multipliers, StageMaps, max_violation, total_violation
@@ -80,10 +81,11 @@ def repropagation_miss(problem, U: np.ndarray) -> float | None:
         scalar = getattr(rhs, "scalar_components", False)
         x = problem.x0.copy()
         for k in range(problem.N):
+            uk = prepared_control(rhs, U[k])   # (the thrust magnitude once per stage)
             if scalar:
-                fun = (lambda t, y, uk=U[k].tolist(): rhs(t, y.tolist(), uk))
+                fun = (lambda t, y, uk=np.asarray(uk).tolist(): rhs(t, y.tolist(), uk))
             else:
-                fun = (lambda t, y, uk=U[k]: rhs(t, y, uk))
+                fun = (lambda t, y, uk=uk: rhs(t, y, uk))
             sol = solve_ivp(fun, (0.0, problem.stage_dt[k]), x, method="DOP853", rtol=1e-12,
                             atol=1e-12, first_step=problem.stage_dt[k])
             x = sol.y[:, -1]
