@@ -207,6 +207,11 @@ _RK78_ROWS = [[(j, a) for j, a in enumerate(row) if a != 0.0] for row in RK78_A]
 _RK78_WEIGHTS = [(j, float(b)) for j, b in enumerate(RK78_B) if b != 0.0]
 
 
+def _float_list(v) -> list:
+    """A right-hand side's value as a list of Python floats (an ndarray's tolist() directly)."""
+    return v.tolist() if type(v) is np.ndarray else np.asarray(v, dtype=float).tolist()
+
+
 @functools.lru_cache(maxsize=None)
 def _single_step(nx: int):
     """One RK78 step of an nx-component state in plain Python floats, generated as straight-line
@@ -234,7 +239,7 @@ def _single_step(nx: int):
     body.append(f"return [{xn}], max({', '.join(f'e{m}' for m in comps)}, 0.0) "
                 f"* ({RK78_ERR!r} * abs(hs))")
     src = "def step(rhs, state, t, x, u, hs):\n" + "".join(f"    {ln}\n" for ln in body)
-    namespace = {"_floats": lambda v: np.asarray(v, dtype=float).tolist(),
+    namespace = {"_floats": _float_list,
                  "_isfinite": math.isfinite, "DaddyError": DaddyError}
     exec(compile(src, f"<rk78 step, nx={nx}>", "exec"), namespace)
     return namespace["step"]

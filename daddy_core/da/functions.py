@@ -89,6 +89,14 @@ def dot(a, b):
 
 def stack(items, axis: int = 0):
     """Stack floats, arrays and DA along a new ``axis`` (of the value shape)."""
+    if axis == 0 and type(items[0]) is float:
+        # Python floats (a scalar-component rhs on RK78's float path): their sum is a float,
+        # while a DA, array or numpy scalar among them makes it something else
+        try:
+            if type(sum(items)) is float:
+                return np.array(items)
+        except TypeError:
+            pass
     if DA not in map(type, items):   # (a C-level scan: 5x cheaper than isinstance per item)
         if axis == 0:   # the same array; np.stack's checks cost ~10x for a few scalars
             return np.array(items)
