@@ -261,7 +261,9 @@ def polish(problem, X, U, opts, deadline: float | None = None,
     step stayed inside their convergence radius (paper eq. 11, as in the Dyn forward pass) and
     re-expanded elsewhere. Newton on these derivatives converges at a rate
     set by their truncation error; an outer iteration that does not reduce the exact residual
-    makes the next one expand every stage afresh.
+    makes the next one expand every stage afresh. Inequalities that a step on the model pushes
+    past the active threshold join the model's active set within the outer iteration
+    (``_Model.activate_violated``, up to MAX_MODEL_ACTIVATIONS times).
     """
     X0, U0 = X.copy(), U.copy()
     gamma = 0.5
