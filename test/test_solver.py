@@ -205,27 +205,3 @@ def test_regularised_inverse_matches_numpy_and_rejects_indefinite(nu):
     assert _regularised_inverse(indefinite, 0.5) is None
     assert _regularised_inverse(indefinite, 1.5) is not None
     assert _regularised_inverse(np.full((nu, nu), np.nan), 1.0) is None
-
-
-def test_newton_model_activates_inequalities_its_step_violates():
-    """A Newton step on the polynomial model that pushes an inactive thrust bound past its
-    threshold adds that row to the model's active set (and Jacobian), once."""
-    from daddy_ros.demo import PLANS_DIR
-    from daddy_core.solver.newton import _Model
-
-    case = load_case("earth_mars")
-    prob = problem_from_case(case)
-    sol = Solution.from_json(PLANS_DIR / "earth_mars_fuel.json")
-    model = _Model(prob, sol.X, sol.U, 1e-6)
-    mags = np.linalg.norm(sol.U, axis=1)
-    k = int(np.argmin(mags))                       # a coasting stage: its bound is inactive
-    assert mags[k] < 0.5 * prob.u_max
-    rows, active = model.n_rows, model.g_active.sum()
-    dY = np.zeros(model.D.shape[1])
-    w = prob.nx + prob.nu
-    dY[k * w:k * w + prob.nu] = np.array([1.2 * prob.u_max, 0.0, 0.0]) - sol.U[k]
-    assert model.activate_violated(dY)
-    assert model.g_active.sum() == active + 1 and model.n_rows == rows + 1
-    assert model.D.shape[0] == rows + 1 and model.residual(dY).shape == (rows + 1,)
-    assert not model.activate_violated(dY)
-    assert not model.activate_violated(np.zeros_like(dY))

@@ -55,7 +55,7 @@ class _Model:
         self.F = expand_dynamics(p, X[:-1], U, p.stage_dt) if F is None else F   # (nx, N)
         z = da.variables(np.concatenate([X[:-1].T, U.T]), order=2)
         g, ni = p.path_constraints(z[:nx], z[nx:], p.stage_dt)
-        self.G, self.n_ineq, self.active_tol = g, ni, active_tol
+        self.G = g
         if g is not None:
             self.g_active = _active(g.cons, ni, active_tol)             # (n_c, N)
         else:
@@ -134,24 +134,6 @@ class _Model:
             parts.append(gt[self.t_active])
         return np.concatenate(parts)
 
-    def activate_violated(self, dY: np.ndarray) -> bool:
-        """Add the path inequalities that the model puts past the active threshold at Y + dY
-        (g > -active_tol there, inactive at Y) to the active set, and rebuild the Jacobian.
-        Returns whether any was added."""
-        if self.G is None or not self.n_ineq:
-            return False
-        p = self.p
-        blocks = dY.reshape(p.N, p.nx + p.nu)
-        dx = np.vstack([np.zeros(p.nx), blocks[:-1, p.nu:]])
-        dz = np.concatenate([dx.T, blocks[:, :p.nu].T])
-        g = da.evaluate(self.G[:self.n_ineq], dz)                     # (n_ineq, N)
-        new = (g > -self.active_tol) & ~self.g_active[:self.n_ineq]
-        if not new.any():
-            return False
-        self.g_active[:self.n_ineq] |= new
-        self._build_jacobian()
-        return True
-
     def apply(self, dY: np.ndarray):
         p = self.p
         w = p.nx + p.nu
@@ -209,48 +191,6 @@ def _stage_maps(problem, maps: StageMaps | None, X, U, fx):
     return F
 
 
-# times per outer iteration the model's active set may grow before the exact residual is taken
-MAX_MODEL_ACTIVATIONS = 3
-
-
-def _factorise(model: _Model, opts) -> _BandedSigma | None:
-    """Factor Delta Delta^T (regularised more if singular); None if that fails too."""
-    for reg in (opts.newton_regularisation, max(1e-8, 1e3 * opts.newton_regularisation)):
-        try:
-            return _BandedSigma(model.D, reg)
-        except (LinAlgError, ValueError):
-            continue
-    return None
-
-
-def _inner_iterations(model: _Model, sigma: _BandedSigma, d, dY, dmax: float, gamma: float,
-                      opts):
-    """Alg. 11's inner loop on the polynomial model, re-using the factorisation: steps
-    -D^T Sigma^-1 d with backtracking until the model residual converges (rate eps_CV) or
-    stalls. Returns (dY, d, dmax, number of accepted steps)."""
-    r = np.inf
-    inner = 0
-    while dmax > opts.tol_newton and r > opts.newton_cv_ratio and inner < 20:
-        step = sigma.step(d)
-        alpha, dstar = 1.0, None
-        for _ in range(25):
-            cand = model.residual(dY + alpha * step)
-            cmax = float(np.max(np.abs(cand)))
-            if np.isfinite(cmax) and cmax < dmax:
-                dstar = cand
-                break
-            alpha *= gamma
-        if dstar is None:
-            break
-        dY = dY + alpha * step
-        d = dstar
-        new_max = float(np.max(np.abs(d)))
-        r = np.log(new_max) / np.log(dmax) if 0 < dmax < 1 and new_max > 0 else np.inf
-        dmax = new_max
-        inner += 1
-    return dY, d, dmax, inner
-
-
 def polish(problem, X, U, opts, deadline: float | None = None,
            maps: StageMaps | None = None) -> PolishResult:
     """Alg. 11 from (X, U) to max active-constraint violation <= opts.tol_newton.
@@ -261,9 +201,7 @@ def polish(problem, X, U, opts, deadline: float | None = None,
     step stayed inside their convergence radius (paper eq. 11, as in the Dyn forward pass) and
     re-expanded elsewhere. Newton on these derivatives converges at a rate
     set by their truncation error; an outer iteration that does not reduce the exact residual
-    makes the next one expand every stage afresh. Inequalities that a step on the model pushes
-    past the active threshold join the model's active set within the outer iteration
-    (``_Model.activate_violated``, up to MAX_MODEL_ACTIVATIONS times).
+    makes the next one expand every stage afresh.
     """
     X0, U0 = X.copy(), U.copy()
     gamma = 0.5
@@ -294,25 +232,36 @@ def polish(problem, X, U, opts, deadline: float | None = None,
         model = _Model(problem, X, U, opts.newton_active_tol,
                        F=_stage_maps(problem, maps, X, U, fx))
         d = model.residual()
-        sigma = _factorise(model, opts)
-        if sigma is None:
-            reason = "Delta Delta^T is singular"
-            break
-        dY, d, dmax, inner = _inner_iterations(model, sigma, d, np.zeros(model.D.shape[1]),
-                                               dmax, gamma, opts)
-        for _ in range(MAX_MODEL_ACTIVATIONS if inner else 0):
-            # inequalities the step pushed past their bound join the active set on the model:
-            # otherwise each such change costs an outer iteration with its exact residual
-            # (halo re-plans: 16 -> 30 -> 31 active thrust bounds over three)
-            if not model.activate_violated(dY):
+        try:
+            sigma = _BandedSigma(model.D, opts.newton_regularisation)
+        except (LinAlgError, ValueError):
+            try:
+                sigma = _BandedSigma(model.D, max(1e-8, 1e3 * opts.newton_regularisation))
+            except (LinAlgError, ValueError):
+                reason = "Delta Delta^T is singular"
                 break
-            sigma = _factorise(model, opts)
-            if sigma is None:
+        dY = np.zeros(model.D.shape[1])
+        r = np.inf
+        inner = 0
+        # inner iterations on the polynomial model, re-using the factorisation (Alg. 11)
+        while dmax > opts.tol_newton and r > opts.newton_cv_ratio and inner < 20:
+            step = sigma.step(d)
+            alpha, dstar = 1.0, None
+            for _ in range(25):
+                cand = model.residual(dY + alpha * step)
+                cmax = float(np.max(np.abs(cand)))
+                if np.isfinite(cmax) and cmax < dmax:
+                    dstar = cand
+                    break
+                alpha *= gamma
+            if dstar is None:
                 break
-            d = model.residual(dY)
-            dY, d, dmax, n = _inner_iterations(model, sigma, d, dY, float(np.max(np.abs(d))),
-                                               gamma, opts)
-            inner += n
+            dY = dY + alpha * step
+            d = dstar
+            new_max = float(np.max(np.abs(d)))
+            r = np.log(new_max) / np.log(dmax) if 0 < dmax < 1 and new_max > 0 else np.inf
+            dmax = new_max
+            inner += 1
         it += 1
         if inner == 0:
             if not fresh:   # re-centred derivatives gave no descent: expand afresh
