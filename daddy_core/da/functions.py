@@ -89,7 +89,7 @@ def dot(a, b):
 
 def stack(items, axis: int = 0):
     """Stack floats, arrays and DA along a new ``axis`` (of the value shape)."""
-    if axis == 0 and type(items[0]) is float:
+    if axis == 0 and items and type(items[0]) is float:
         # Python floats (a scalar-component rhs on RK78's float path): their sum is a float,
         # while a DA, array or numpy scalar among them makes it something else
         try:
