@@ -38,6 +38,9 @@ PLAN_FORMAT = "daddy-plan-1"
 WARM_MU_INIT = 1e5
 # augmented-Lagrangian tolerance of a polished warm re-optimisation without an explicit tol_aul
 WARM_TOL_AUL = 1e-5
+# a warm re-optimisation's Newton steps hold inequalities within this of their bound on it (the
+# thrust bound is |u|^2 / u_max^2 - 1 <= 0: |u| within 5e-5 relative of u_max); see __init__
+WARM_ACTIVE_TOL = 1e-4
 # thrust ratings a re-plan climbs through when the one below cannot meet the target, as the
 # fraction of the thrust margin still held back (1: the derated bound, 0: the full rating)
 MARGIN_LADDER = (1.0, 0.6, 0.3, 0.0)
@@ -160,13 +163,21 @@ class GuidancePlanner:
         # the AUL rounds down to 1e-6 changed the cost by ~1e-5 relative (Earth-Mars ~5 g of
         # propellant, halo < 1 g, 4 perturbed states each) for a third of the re-plan time
         # (halo: 4 AUL / 9 DDP iterations -> 1 / 1).
+        # Newton treats inequalities within WARM_ACTIVE_TOL of their bound as active: the AUL
+        # leaves a fuel-optimal plan's full-thrust arcs up to ~1e-5 inside the bound, Newton's
+        # first min-norm step (with them inactive at the options' 1e-6) pushed them past it and
+        # the next iterations pulled them back (halo: active thrust bounds 16 -> 30 -> 31,
+        # 6-7 Newton iterations; held on the bound from the start: 4-5, restore 95 -> 60 ms,
+        # final masses 0.3-3 g higher on the 4 bench perturbations).
         warm_tol_aul = tol_aul or (max(WARM_TOL_AUL, self.options.tol_aul) if self.polish
                                    else self.options.tol_aul)
         self.replan_options = self.options.with_(homotopy=self.options.homotopy[-1:],
                                                  ddp_min_iter=1, mu_init=WARM_MU_INIT,
                                                  short_step=0.5, carry_rho=True,
                                                  restore_warm_start=bool(restore_first),
-                                                 tol_aul=warm_tol_aul, polish_from_ddp_maps=True)
+                                                 tol_aul=warm_tol_aul, polish_from_ddp_maps=True,
+                                                 newton_active_tol=max(WARM_ACTIVE_TOL,
+                                                                       self.options.newton_active_tol))
         self.time_budget_s = time_budget_s
         self.staleness_s = staleness_s
         self.mass_tolerance_kg = mass_tolerance_kg
@@ -341,8 +352,9 @@ class GuidancePlanner:
             if problem.N <= MIN_STAGES_LEFT:
                 # the last stages (arrival phase, re-gridded): the full AUL tolerance and
                 # polishing from fresh expansions (Monte Carlo arrival misses of 1.01 and
-                # 1.39 cm/s otherwise, one run in 40 each)
-                opts = opts.with_(tol_aul=self.options.tol_aul, polish_from_ddp_maps=False)
+                # 1.39 cm/s otherwise, one run in 40 each), the case's Newton active set
+                opts = opts.with_(tol_aul=self.options.tol_aul, polish_from_ddp_maps=False,
+                                  newton_active_tol=self.options.newton_active_tol)
             # the current plan may already fly above the derating: start from the lowest rating
             # it keeps to instead of failing on the bounds below first
             rung = self._rung_for(U_guess)
