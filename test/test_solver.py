@@ -142,6 +142,40 @@ def test_stage_maps_roll_out_and_restore_like_integration():
     assert isinstance(reused.maps, StageMaps)
 
 
+def test_weighted_newton_steps_keep_coasting_arcs_and_converge_in_one_iteration():
+    # Earth-Mars nominal plan from a start 1000 km / 1 m/s off (the re-plan benchmark's size):
+    # plain minimum-norm steps move the coasting stages' small controls and converge linearly
+    # on their mass-flow model error; steps weighted by the thrust level do not
+    from daddy_core.solver.newton import _BandedSigma, _Model, _column_weights, polish
+    case = load_case("earth_mars")
+    prob = problem_from_case(case)
+    plan = Solution.from_json(pathlib.Path(__file__).parents[1] / "daddy_ros" / "plans"
+                              / "earth_mars_fuel.json")
+    u = case.units
+    moved = prob.with_x0(plan.X[0] + np.r_[u.length([6e5, -8e5, 0.0]), u.speed([0.6, 0.8, 0.0]),
+                                           0.0])
+    X0 = prob.rollout(plan.U, x0=moved.x0)
+    opts = case_options(case, True)
+    assert opts.newton_control_weight_floor == 1e-2            # the default
+    plain = polish(moved, X0, plan.U, opts.with_(newton_control_weight_floor=0.0))
+    weighted = polish(moved, X0, plan.U, opts)
+    assert plain.converged and weighted.converged
+    assert weighted.iterations <= 2 < plain.iterations
+    coast = np.linalg.norm(plan.U, axis=1) < 1e-2 * prob.u_max
+    assert coast.sum() >= 5
+    moved_by = {name: np.max(np.linalg.norm(r.U - plan.U, axis=1)[coast])
+                for name, r in (("plain", plain), ("weighted", weighted))}
+    assert moved_by["weighted"] < 0.1 * moved_by["plain"]
+    # the weighted step solves the same linearised constraints: D dY = -d
+    model = _Model(moved, X0, plan.U, opts.newton_active_tol)
+    d = model.residual()
+    scale = _column_weights(moved, plan.U, 1e-2)
+    dY = _BandedSigma(model.D, opts.newton_regularisation, scale).step(d)
+    np.testing.assert_allclose(model.D @ dY, -d, atol=1e-9 * np.max(np.abs(d)))
+    assert _column_weights(moved, plan.U, 0.0) is None
+    assert _column_weights(problem_from_case(DI), np.ones((11, 3)), 1e-2) is None
+
+
 def test_feedback_gains_shape():
     sol = solve_case("double_integrator")
     assert sol.gains_a.shape == (11, 3) and sol.gains_b.shape == (11, 3, 6)
@@ -187,6 +221,8 @@ def test_options_are_validated():
         SolverOptions(tol_ddp=-1.0)
     with pytest.raises(DaddyError, match="homotopy"):
         SolverOptions(homotopy=((2.0, 0.1),))
+    with pytest.raises(DaddyError, match="newton_control_weight_floor"):
+        SolverOptions(newton_control_weight_floor=2.0)
 
 
 @pytest.mark.parametrize("nu", [1, 2, 3, 4])

@@ -49,6 +49,10 @@ class SolverOptions:
         newton_cv_ratio: the polishing's convergence-rate threshold (eps_CV, paper Alg. 5).
         newton_active_tol: an inequality with g > -tol is treated as active in the polishing.
         newton_regularisation: diagonal added to Delta Delta^T if it is not positive definite.
+        newton_control_weight_floor: the polishing's steps weigh each stage's control by
+            max(|u_k| / u_max, floor)^2 (problems with a thrust bound), so that coasting stages
+            keep coasting and the thrust arcs take the correction (see ``newton``); 0: the
+            paper's plain minimum-norm steps.
         homotopy: sequence of (h, delta) pairs for the fuel-optimal homotopy (h = Huber weight).
         time_budget_s: wall-clock budget for the whole solve (None: unbounded).
         verbose: print progress lines (homotopy step, AUL iteration, violation, cost).
@@ -81,6 +85,7 @@ class SolverOptions:
     newton_cv_ratio: float = 1.1
     newton_active_tol: float = 1e-6
     newton_regularisation: float = 1e-12
+    newton_control_weight_floor: float = 1e-2
     homotopy: tuple = ((0.0, 1e-2),)
     time_budget_s: float | None = None
     verbose: bool = False
@@ -96,6 +101,9 @@ class SolverOptions:
         for name in ("tol_ddp", "tol_aul", "tol_newton", "rho_max", "rho_factor", "mu_growth"):
             if getattr(self, name) <= 0:
                 raise DaddyError(f"options.{name} must be > 0")
+        if self.newton_control_weight_floor > 1:
+            raise DaddyError("options.newton_control_weight_floor must be in [0, 1], got "
+                             f"{self.newton_control_weight_floor!r}")
         try:
             hom = tuple(tuple(map(float, p)) for p in self.homotopy)
         except (TypeError, ValueError) as exc:
