@@ -202,22 +202,24 @@ def test_message_conversions_round_trip(planner):
 
 
 def test_warm_replans_loosen_the_aul_tolerance_except_in_the_arrival_phase(monkeypatch):
-    """Polished warm re-plans stop the AUL at WARM_TOL_AUL (Newton finishes the constraints)
-    and polish from the DDP's maps; the arrival phase keeps the case's tolerance and fresh
-    expansions, an explicit tol_aul applies throughout, and without polishing nothing
-    changes."""
+    """Polished warm re-plans stop the AUL at WARM_TOL_AUL (Newton finishes the constraints),
+    polish from the DDP's maps and hold inequalities within WARM_ACTIVE_TOL on their bound; the
+    arrival phase keeps the case's tolerances and fresh expansions, an explicit tol_aul applies
+    throughout, and without polishing nothing changes."""
     import daddy_ros.planner as planner_mod
-    from daddy_ros.planner import WARM_TOL_AUL
+    from daddy_ros.planner import WARM_ACTIVE_TOL, WARM_TOL_AUL
     pl = GuidancePlanner("earth_mars")
-    case_tol = pl.options.tol_aul
+    case_tol, case_active = pl.options.tol_aul, pl.options.newton_active_tol
     assert case_tol < WARM_TOL_AUL and pl.replan_options.tol_aul == WARM_TOL_AUL
+    assert case_active < WARM_ACTIVE_TOL == pl.replan_options.newton_active_tol
     assert GuidancePlanner("earth_mars", tol_aul=2e-6).replan_options.tol_aul == 2e-6
     assert GuidancePlanner("earth_mars", polish=False).replan_options.tol_aul == case_tol
     seen = []
     real_solve = planner_mod.solve
 
     def recording_solve(problem, *args, **kw):
-        seen.append((problem.N, kw["options"].tol_aul, kw["options"].polish_from_ddp_maps))
+        o = kw["options"]
+        seen.append((problem.N, o.tol_aul, o.polish_from_ddp_maps, o.newton_active_tol))
         return real_solve(problem, *args, **kw)
 
     monkeypatch.setattr(planner_mod, "solve", recording_solve)
@@ -228,6 +230,6 @@ def test_warm_replans_loosen_the_aul_tolerance_except_in_the_arrival_phase(monke
         seen.clear()
         out = pl.replan(s[:3] + 1e5, s[3:6], s[6], t, f"k{k}", now_s=t)
         assert out.ok, out.reason
-        assert seen[0] == ((len(plan.stage_dt_s) - k, WARM_TOL_AUL, True) if k == 10
-                           else (MIN_STAGES_LEFT, case_tol, False))
+        assert seen[0] == ((len(plan.stage_dt_s) - k, WARM_TOL_AUL, True, WARM_ACTIVE_TOL)
+                           if k == 10 else (MIN_STAGES_LEFT, case_tol, False, case_active))
         assert out.plan.solution.max_violation <= 1e-9
