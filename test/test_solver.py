@@ -131,6 +131,9 @@ def test_stage_maps_roll_out_and_restore_like_integration():
     X_int, (X_dyn, served) = prob.rollout(U), maps.rollout(prob, U)
     assert served > prob.N // 2
     assert np.max(np.abs(X_dyn - X_int)) < 1e-4                # within eps_da per stage
+    _, inside = maps.deviation(X_int, U)
+    _, inside10 = maps.deviation(X_int, U, reach=10.0)         # Newton's MAP_REACH
+    assert inside.sum() < inside10.sum() and np.all(inside10[inside])
     tail = maps.tail(3, first_valid=False)
     assert tail.N == prob.N - 3 and tail.radius[0] == 0 and tail.radius[1] == maps.radius[4]
     moved = prob.with_x0(plan.X[0] + np.r_[1e-6, -1e-6, 0, 0, 0, 0, 0])

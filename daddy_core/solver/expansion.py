@@ -189,16 +189,18 @@ class StageMaps:
     def N(self) -> int:
         return self.U.shape[0]
 
-    def deviation(self, X: np.ndarray, U: np.ndarray):
+    def deviation(self, X: np.ndarray, U: np.ndarray, reach: float = 1.0):
         """dz (n, N) of the stages (X[k], U[k]) from the expansion point, and (N,) whether each
-        lies inside its map's radius."""
+        lies inside ``reach`` times its map's radius."""
         dz = np.concatenate([(X[:self.N] - self.X).T, (U - self.U).T])
-        return dz, np.sqrt(np.sum(dz * dz, axis=0)) < self.radius
+        return dz, np.sqrt(np.sum(dz * dz, axis=0)) < self.radius * reach
 
-    def at(self, problem, X: np.ndarray, U: np.ndarray, values=None):
-        """DA (nx, N) maps at (X[k], U[k]): re-centred inside the radius, expanded elsewhere
-        (``values``: as for ``maps_at``)."""
-        dz, inside = self.deviation(X, U)
+    def at(self, problem, X: np.ndarray, U: np.ndarray, values=None, reach: float = 1.0):
+        """DA (nx, N) maps at (X[k], U[k]): re-centred inside ``reach`` times the radius,
+        expanded elsewhere (``values``: as for ``maps_at``). Beyond the radius (reach > 1) the
+        re-centred values and derivatives carry more than the radius's truncation error: for
+        callers that replace the values by exact ones and only need approximate derivatives."""
+        dz, inside = self.deviation(X, U, reach)
         return maps_at(problem, self.F, dz, inside, X, U, values)
 
     def rollout(self, problem, U: np.ndarray) -> tuple[np.ndarray, int]:
