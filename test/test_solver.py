@@ -50,7 +50,8 @@ def test_earth_mars_energy_dyn_matches_reference_oracle():
     assert sol.max_violation <= 1e-10
     assert sol.final_mass_kg == pytest.approx(556.413, abs=0.05)  # C++ reference / CasADi 556.41
     assert sol.repropagation_miss < 1e-8
-    ref = np.loadtxt(DATA / "earth_mars_energy__cylindrical.csv", delimiter=",", max_rows=40)
+    ref = np.loadtxt(DATA / "earth_mars_energy__cylindrical.csv", delimiter=",", skiprows=1,
+                     max_rows=40)   # (line 1: the column header comment)
     thrust = np.linalg.norm(sol.U_newton, axis=1)
     # single optimum: the thrust profile agrees with the independent direct-transcription solve
     assert np.max(np.abs(thrust - ref[:, 12])) < 0.02

@@ -12,7 +12,7 @@ from ..integrators import prepared_control
 from .aul import aul
 from .ddp import DDPStats
 from .expansion import Multipliers, StageMaps, max_violation, total_violation
-from .newton import polish as newton_polish
+from .newton import MAP_REACH, polish as newton_polish
 from .options import SolverOptions, parse_method
 from .solution import Solution
 
@@ -166,8 +166,12 @@ def solve(problem, u_guess=None, method: str = "dyn", fuel_optimal: bool | None 
             X, U = pres.X, pres.U
             restored = (X, U)
             final_maps = pres.maps
-            if pres.maps is not None:   # the DDP starts from the Newton model's maps, re-centred
-                F0 = pres.maps.at(problem, X, U)
+            if pres.maps is not None:
+                # the DDP starts from the Newton model's maps, re-centred as Newton re-centres
+                # them (up to MAP_REACH radii: Earth-Mars re-plans, Jacobians within 1.5e-6 of
+                # fresh expansions either way), with the restored flows as their values
+                F0 = pres.maps.at(problem, X, U, reach=MAP_REACH)
+                F0.c[0] = X[1:].T
         if progress:
             progress(f"warm start restored by Newton: {pres.iterations} iterations, max violation"
                      f" {pres.max_violation:.2e} ({pres.reason})")
