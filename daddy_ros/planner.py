@@ -166,9 +166,13 @@ class GuidancePlanner:
         # Newton treats inequalities within WARM_ACTIVE_TOL of their bound as active: the AUL
         # leaves a fuel-optimal plan's full-thrust arcs up to ~1e-5 inside the bound, Newton's
         # first min-norm step (with them inactive at the options' 1e-6) pushed them past it and
-        # the next iterations pulled them back (halo: active thrust bounds 16 -> 30 -> 31,
-        # 6-7 Newton iterations; held on the bound from the start: 4-5, restore 95 -> 60 ms,
-        # final masses 0.3-3 g higher on the 4 bench perturbations).
+        # the next iterations pulled them back (halo: active thrust bounds 16 -> 30 -> 31). Held
+        # on the bound from the start, the halo re-plans of bench_replan take 3 Newton
+        # iterations instead of 4-5 and end 0-2 g heavier.
+        # DDP stops before a step whose predicted decrease is below tol_ddp
+        # (SolverOptions.ddp_stop_on_prediction): from the Newton-restored start of an
+        # Earth-Mars re-plan it predicted 1e-6 relative, then spent three forward passes and a
+        # Newton polishing iteration on a 3e-7 gain (final masses within 0.4 g either way).
         warm_tol_aul = tol_aul or (max(WARM_TOL_AUL, self.options.tol_aul) if self.polish
                                    else self.options.tol_aul)
         self.replan_options = self.options.with_(homotopy=self.options.homotopy[-1:],
@@ -176,6 +180,7 @@ class GuidancePlanner:
                                                  short_step=0.5, carry_rho=True,
                                                  restore_warm_start=bool(restore_first),
                                                  tol_aul=warm_tol_aul, polish_from_ddp_maps=True,
+                                                 ddp_stop_on_prediction=True,
                                                  newton_active_tol=max(WARM_ACTIVE_TOL,
                                                                        self.options.newton_active_tol))
         self.time_budget_s = time_budget_s
@@ -354,7 +359,8 @@ class GuidancePlanner:
                 # polishing from fresh expansions (Monte Carlo arrival misses of 1.01 and
                 # 1.39 cm/s otherwise, one run in 40 each), the case's Newton active set
                 opts = opts.with_(tol_aul=self.options.tol_aul, polish_from_ddp_maps=False,
-                                  newton_active_tol=self.options.newton_active_tol)
+                                  newton_active_tol=self.options.newton_active_tol,
+                                  ddp_stop_on_prediction=False)
             # the current plan may already fly above the derating: start from the lowest rating
             # it keeps to instead of failing on the bounds below first
             rung = self._rung_for(U_guess)

@@ -203,9 +203,9 @@ def test_message_conversions_round_trip(planner):
 
 def test_warm_replans_loosen_the_aul_tolerance_except_in_the_arrival_phase(monkeypatch):
     """Polished warm re-plans stop the AUL at WARM_TOL_AUL (Newton finishes the constraints),
-    polish from the DDP's maps and hold inequalities within WARM_ACTIVE_TOL on their bound; the
-    arrival phase keeps the case's tolerances and fresh expansions, an explicit tol_aul applies
-    throughout, and without polishing nothing changes."""
+    polish from the DDP's maps, hold inequalities within WARM_ACTIVE_TOL on their bound and stop
+    DDP on a negligible predicted decrease; the arrival phase keeps the case's settings and fresh
+    expansions, an explicit tol_aul applies throughout, and without polishing nothing changes."""
     import daddy_ros.planner as planner_mod
     from daddy_ros.planner import WARM_ACTIVE_TOL, WARM_TOL_AUL
     pl = GuidancePlanner("earth_mars")
@@ -219,7 +219,8 @@ def test_warm_replans_loosen_the_aul_tolerance_except_in_the_arrival_phase(monke
 
     def recording_solve(problem, *args, **kw):
         o = kw["options"]
-        seen.append((problem.N, o.tol_aul, o.polish_from_ddp_maps, o.newton_active_tol))
+        seen.append((problem.N, o.tol_aul, o.polish_from_ddp_maps, o.newton_active_tol,
+                     o.ddp_stop_on_prediction))
         return real_solve(problem, *args, **kw)
 
     monkeypatch.setattr(planner_mod, "solve", recording_solve)
@@ -230,6 +231,29 @@ def test_warm_replans_loosen_the_aul_tolerance_except_in_the_arrival_phase(monke
         seen.clear()
         out = pl.replan(s[:3] + 1e5, s[3:6], s[6], t, f"k{k}", now_s=t)
         assert out.ok, out.reason
-        assert seen[0] == ((len(plan.stage_dt_s) - k, WARM_TOL_AUL, True, WARM_ACTIVE_TOL)
-                           if k == 10 else (MIN_STAGES_LEFT, case_tol, False, case_active))
+        assert seen[0] == ((len(plan.stage_dt_s) - k, WARM_TOL_AUL, True, WARM_ACTIVE_TOL, True)
+                           if k == 10 else (MIN_STAGES_LEFT, case_tol, False, case_active, False))
         assert out.plan.solution.max_violation <= 1e-9
+
+
+def test_warm_replan_from_a_restored_start_skips_a_negligible_ddp_step():
+    """Earth-Mars, 1000 km / 1 m/s off the plan after 2 stages: the Newton-restored start is
+    optimal to tol_ddp, so DDP stops before its forward pass (ddp_stop_on_prediction), and the
+    plan is as feasible and within a gram as heavy as with the step."""
+    pl = GuidancePlanner("earth_mars")
+    plan = pl.load_plan(PLANS_DIR / "earth_mars_fuel.json", T0_S)
+    k = 2
+    t = plan.epoch_s + np.sum(plan.stage_dt_s[:k])
+    s = plan.states_si[k]
+    pos, vel = s[:3] + np.array([6e5, -8e5, 0.0]), s[3:6] + np.array([0.6, 0.8, 0.0])
+    masses = {}
+    for stop in (True, False):
+        pl.replan_options = pl.replan_options.with_(ddp_stop_on_prediction=stop)
+        pl.set_plan(plan)
+        out = pl.replan(pos, vel, s[6], t, f"stop={stop}", now_s=t)
+        assert out.ok and out.level == "OK", out.reason
+        sol = out.plan.solution
+        assert sol.max_violation <= 1e-10 and sol.repropagation_miss < 1e-8
+        assert (sol.iterations["ddp"] == 0) == stop
+        masses[stop] = sol.final_mass_kg
+    assert abs(masses[True] - masses[False]) < 1e-3

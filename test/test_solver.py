@@ -110,6 +110,18 @@ def test_solution_round_trips_and_warm_starts(tmp_path):
     assert warm.cost == pytest.approx(sol.cost, rel=1e-9)
 
 
+def test_ddp_stop_on_prediction_still_steps_from_an_infeasible_start():
+    # from an infeasible start the small steps are how the augmented Lagrangian meets the
+    # constraints: DDP still takes them (the stop needs the constraints met to tol_aul; the
+    # guidance planner's use from a restored start: test_planner)
+    di = problem_from_case(DI)
+    sol = solve_case("double_integrator")
+    warm = solve(di, sol.U * 1.01, options=case_options(DI, False).with_(
+        ddp_min_iter=1, ddp_stop_on_prediction=True))
+    assert warm.converged and warm.iterations["ddp"] > 0
+    assert warm.cost == pytest.approx(sol.cost, rel=1e-6)
+
+
 def test_stage_maps_roll_out_and_restore_like_integration():
     # the Earth-Mars nominal plan's stage maps: a Dyn rollout (polynomials inside their radius)
     # follows the integrated one, and a Newton restoration from a perturbed start that

@@ -17,7 +17,7 @@ import numpy as np
 
 from .. import da
 from ..errors import DaddyError
-from .expansion import Stages, augmented_cost, expand_dynamics, maps_at
+from .expansion import Stages, augmented_cost, expand_dynamics, maps_at, total_violation
 
 
 @dataclass
@@ -317,6 +317,15 @@ def ddp(st: Stages, sweep: str, dyn: bool, opts, stats: DDPStats, deadline: floa
                 return DDPResult(st, False, it, "Q_uu not positive definite up to rho_max", rho, last)
             continue
         last = gains
+        # SolverOptions.ddp_stop_on_prediction: converged before any step when the full step's
+        # predicted decrease is below tol_ddp (the post-step test below would call that step's
+        # outcome converged anyway) and the constraints are met to tol_aul (else the small
+        # steps are how the augmented Lagrangian makes progress on them)
+        full_step_gain = -(gains.dv1 + gains.dv2) / max(abs(J), 1e-300)
+        if opts.ddp_stop_on_prediction and it >= opts.ddp_min_iter and \
+                0.0 <= full_step_gain < opts.tol_ddp and \
+                total_violation(p, st.X, st.U) <= opts.tol_aul:
+            return DDPResult(st, True, it - 1, "predicted cost decrease below tol_ddp", rho, last)
         accepted = False
         a0 = alpha if dyn else 1.0
         t0 = time.perf_counter()
@@ -361,7 +370,6 @@ def ddp(st: Stages, sweep: str, dyn: bool, opts, stats: DDPStats, deadline: floa
             alpha = min(1.0, 2.0 * a)
         # converged when the decrease is small for a (nearly) full step: a small decrease after a
         # heavily shortened step only says the line search struggled
-        full_step_gain = -(gains.dv1 + gains.dv2) / max(abs(J), 1e-300)
         if (it >= opts.ddp_min_iter and 0.0 <= rel < opts.tol_ddp
                 and (a >= 0.5 or full_step_gain < opts.tol_ddp)):
             return DDPResult(st, True, it, "relative cost decrease below tol_ddp", rho, last)
