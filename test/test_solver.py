@@ -147,6 +147,8 @@ def test_stage_maps_roll_out_and_restore_like_integration():
     _, inside = maps.deviation(X_int, U)
     _, inside10 = maps.deviation(X_int, U, reach=10.0)         # Newton's MAP_REACH
     assert inside.sum() < inside10.sum() and np.all(inside10[inside])
+    X_far, served_far = maps.rollout(prob, U, reach=10.0)      # a start for the restoration
+    assert served_far > served and np.max(np.abs(X_far - X_int)) < 1e-8   # (measured 6e-13)
     tail = maps.tail(3, first_valid=False)
     assert tail.N == prob.N - 3 and tail.radius[0] == 0 and tail.radius[1] == maps.radius[4]
     moved = prob.with_x0(plan.X[0] + np.r_[1e-6, -1e-6, 0, 0, 0, 0, 0])

@@ -203,17 +203,19 @@ class StageMaps:
         dz, inside = self.deviation(X, U, reach)
         return maps_at(problem, self.F, dz, inside, X, U, values)
 
-    def rollout(self, problem, U: np.ndarray) -> tuple[np.ndarray, int]:
+    def rollout(self, problem, U: np.ndarray, reach: float = 1.0) -> tuple[np.ndarray, int]:
         """Propagate U (N, nu) from problem.x0, evaluating a stage's map where the stage lies
-        inside its radius and integrating it otherwise (the Dyn forward pass, Alg. 8, with no
-        feedback). Returns X (N+1, nx) and the number of stages served by a polynomial."""
+        inside ``reach`` times its radius and integrating it otherwise (the Dyn forward pass,
+        Alg. 8, with no feedback; reach > 1: a start for Newton, whose residuals are exact).
+        Returns X (N+1, nx) and the number of stages served by a polynomial."""
         N = problem.N
         X = np.empty((N + 1, problem.nx))
         X[0] = problem.x0
         served = 0
+        radius = self.radius * reach
         for k in range(N):
             dz = np.concatenate([X[k] - self.X[k], U[k] - self.U[k]])
-            if np.sqrt(dz @ dz) < self.radius[k]:
+            if np.sqrt(dz @ dz) < radius[k]:
                 X[k + 1] = da.evaluate(self.F[:, k], dz)
                 served += 1
             else:

@@ -150,7 +150,10 @@ def solve(problem, u_guess=None, method: str = "dyn", fuel_optimal: bool | None 
     stats = DDPStats()
     if maps is not None and maps.N != problem.N:
         raise DaddyError(f"maps cover {maps.N} stages, the problem has {problem.N}")
-    X = problem.rollout(U0) if maps is None else maps.rollout(problem, U0)[0]
+    # a start for the Newton restoration only needs to be near (its residuals are exact): the
+    # maps then serve stages up to MAP_REACH radii (Earth-Mars re-plan rollout ~5 -> ~1 ms)
+    reach = MAP_REACH if opts.restore_warm_start else 1.0
+    X = problem.rollout(U0) if maps is None else maps.rollout(problem, U0, reach)[0]
     t_rollout = time.perf_counter() - t_start
     if not np.all(np.isfinite(X)):
         raise DaddyError("the initial guess propagates to a non-finite state")
@@ -172,6 +175,8 @@ def solve(problem, u_guess=None, method: str = "dyn", fuel_optimal: bool | None 
                 # fresh expansions either way), with the restored flows as their values
                 F0 = pres.maps.at(problem, X, U, reach=MAP_REACH)
                 F0.c[0] = X[1:].T
+        elif maps is not None and reach > 1:
+            X = maps.rollout(problem, U)[0]   # DDP starts from a consistent trajectory
         if progress:
             progress(f"warm start restored by Newton: {pres.iterations} iterations, max violation"
                      f" {pres.max_violation:.2e} ({pres.reason})")
