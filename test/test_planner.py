@@ -238,8 +238,9 @@ def test_warm_replans_loosen_the_aul_tolerance_except_in_the_arrival_phase(monke
 
 def test_warm_replan_from_a_restored_start_skips_a_negligible_ddp_step():
     """Earth-Mars, 1000 km / 1 m/s off the plan after 2 stages: the Newton-restored start is
-    optimal to tol_ddp, so DDP stops before its forward pass (ddp_stop_on_prediction), and the
-    plan is as feasible and within a gram as heavy as with the step."""
+    optimal to tol_ddp, so DDP stops before its forward pass (ddp_stop_on_prediction) and the
+    restored start needs no polishing; the plan is as feasible and within a gram as heavy as
+    with the step."""
     pl = GuidancePlanner("earth_mars")
     plan = pl.load_plan(PLANS_DIR / "earth_mars_fuel.json", T0_S)
     k = 2
@@ -255,5 +256,6 @@ def test_warm_replan_from_a_restored_start_skips_a_negligible_ddp_step():
         sol = out.plan.solution
         assert sol.max_violation <= 1e-10 and sol.repropagation_miss < 1e-8
         assert (sol.iterations["ddp"] == 0) == stop
+        assert (sol.runtime_s["newton"] == 0.0) == stop   # nothing left to polish
         masses[stop] = sol.final_mass_kg
     assert abs(masses[True] - masses[False]) < 1e-3

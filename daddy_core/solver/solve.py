@@ -228,7 +228,11 @@ def solve(problem, u_guess=None, method: str = "dyn", fuel_optimal: bool | None 
         X, U = restored
         reason += "; returned the Newton-restored warm start"
     newton_iters, t_newton = restore_iters, 0.0
-    if polish and not fallback:
+    # a DDP that took no step from the Newton-restored start (ddp_stop_on_prediction) leaves a
+    # trajectory that meets the constraints to tol_newton: polishing would repeat its residual
+    untouched = (restored is not None and np.array_equal(X, restored[0])
+                 and np.array_equal(U, restored[1]))
+    if polish and not fallback and not untouched:
         t0 = time.perf_counter()
         # fresh expansions first unless asked otherwise: the Dyn pass's maps, re-centred again
         # and again, carry derivative errors (see SolverOptions.polish_from_ddp_maps)
