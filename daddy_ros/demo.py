@@ -319,11 +319,9 @@ def main(argv=None) -> int:
                          "prediction (0: off)")
     ap.add_argument("--trigger-cm-s", type=float, default=5.0,
                     help="also re-optimise when the estimated velocity drifts this far (0: off)")
-    ap.add_argument("--arrival-tolerance-km", type=float, default=0.5,
+    ap.add_argument("--arrival-tolerance-km", type=float, default=0.3,
                     help="in the arrival phase the guidance targets the velocity exactly and the "
-                         "position within this distance (node parameter arrival_tolerance_m; "
-                         "half the 1 km requirement: with 0.3 km the Monte Carlo's only failures "
-                         "were velocity misses of 1.05-1.16 cm/s traded for positions 0.37 km off)")
+                         "position within this distance (node parameter arrival_tolerance_m)")
     ap.add_argument("--time-budget", type=float, default=60.0)
     ap.add_argument("--no-errors", action="store_true", help="perfect navigation and execution")
     ap.add_argument("--plot", default="out/gnc_demo.png", help="PNG of flown vs planned")
