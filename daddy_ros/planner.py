@@ -169,7 +169,7 @@ class GuidancePlanner:
         # the next iterations pulled them back (halo: active thrust bounds 16 -> 30 -> 31). Held
         # on the bound from the start, the halo re-plans of bench_replan take 3 Newton
         # iterations instead of 4-5 and end 0-2 g heavier.
-        # DDP stops before a step whose predicted decrease is below tol_ddp
+        # DDP stops before a step whose predicted decrease is below a tenth of tol_ddp
         # (SolverOptions.ddp_stop_on_prediction): from the Newton-restored start of an
         # Earth-Mars re-plan it predicted 1e-6 relative, then spent three forward passes and a
         # Newton polishing iteration on a 3e-7 gain (final masses within 0.4 g either way).

@@ -17,8 +17,8 @@ class SolverOptions:
         ddp_min_iter: iterations before the tol_ddp test applies (the reference: 3; a
             warm start from a converged solution can stop after 1).
         ddp_stop_on_prediction: also stop DDP, before the forward pass, when the backward
-            sweep predicts a relative decrease below tol_ddp for the full step (after
-            ddp_min_iter iterations). For warm re-plans from a Newton-restored start (Earth-Mars:
+            sweep predicts a relative decrease below tol_ddp / 10 for the full step (after
+            ddp_min_iter iterations) and the constraints meet tol_aul. For warm re-plans from a Newton-restored start (Earth-Mars:
             predicted 1e-6 relative, and the line search took three forward passes to gain
             3e-7 that the polishing then had to make feasible again). Off by default: in cold
             solves skipping those last small steps changed the augmented-Lagrangian path
