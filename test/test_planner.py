@@ -203,9 +203,10 @@ def test_message_conversions_round_trip(planner):
 
 def test_warm_replans_loosen_the_aul_tolerance_except_in_the_arrival_phase(monkeypatch):
     """Polished warm re-plans stop the AUL at WARM_TOL_AUL (Newton finishes the constraints),
-    polish from the DDP's maps, hold inequalities within WARM_ACTIVE_TOL on their bound and stop
-    DDP on a negligible predicted decrease; the arrival phase keeps the case's settings and fresh
-    expansions, an explicit tol_aul applies throughout, and without polishing nothing changes."""
+    polish from the DDP's maps and hold inequalities within WARM_ACTIVE_TOL on their bound (and
+    do not stop DDP on its prediction alone); the arrival phase keeps the case's settings and
+    fresh expansions, an explicit tol_aul applies throughout, and without polishing nothing
+    changes."""
     import daddy_ros.planner as planner_mod
     from daddy_ros.planner import WARM_ACTIVE_TOL, WARM_TOL_AUL
     pl = GuidancePlanner("earth_mars")
@@ -231,16 +232,16 @@ def test_warm_replans_loosen_the_aul_tolerance_except_in_the_arrival_phase(monke
         seen.clear()
         out = pl.replan(s[:3] + 1e5, s[3:6], s[6], t, f"k{k}", now_s=t)
         assert out.ok, out.reason
-        assert seen[0] == ((len(plan.stage_dt_s) - k, WARM_TOL_AUL, True, WARM_ACTIVE_TOL, True)
+        assert seen[0] == ((len(plan.stage_dt_s) - k, WARM_TOL_AUL, True, WARM_ACTIVE_TOL, False)
                            if k == 10 else (MIN_STAGES_LEFT, case_tol, False, case_active, False))
         assert out.plan.solution.max_violation <= 1e-9
 
 
-def test_warm_replan_from_a_restored_start_skips_a_negligible_ddp_step():
+def test_warm_replan_from_a_restored_start_can_skip_a_negligible_ddp_step():
     """Earth-Mars, 1000 km / 1 m/s off the plan after 2 stages: the Newton-restored start is
-    optimal to tol_ddp, so DDP stops before its forward pass (ddp_stop_on_prediction) and the
-    restored start needs no polishing; the plan is as feasible and within a gram as heavy as
-    with the step."""
+    optimal to tol_ddp, so with ddp_stop_on_prediction (not the planner's default) DDP stops
+    before its forward pass and the restored start needs no polishing; the plan is as feasible
+    and within a gram as heavy as with the step."""
     pl = GuidancePlanner("earth_mars")
     plan = pl.load_plan(PLANS_DIR / "earth_mars_fuel.json", T0_S)
     k = 2

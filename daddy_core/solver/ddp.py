@@ -268,7 +268,8 @@ def new_maps(st: Stages, X, U, poly, dz, dyn: bool):
 # ddp_stop_on_prediction stops when the predicted decrease is below this fraction of tol_ddp:
 # at tol_ddp itself the closed-loop halo re-plans (predicted ~6e-5 relative each) skipped every
 # step and the Monte Carlo flew 35 g more propellant (median 26.81 kg instead of 26.78); the
-# Earth-Mars bench re-plans predict ~1e-6
+# Earth-Mars bench re-plans predict ~1e-6. (The guidance planner does not use the stop: see
+# GuidancePlanner.__init__.)
 PREDICTED_STOP_FRACTION = 0.1
 @dataclass
 class DDPResult:
