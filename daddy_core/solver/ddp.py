@@ -271,6 +271,8 @@ def new_maps(st: Stages, X, U, poly, dz, dyn: bool):
 # Earth-Mars bench re-plans predict ~1e-6. (The guidance planner does not use the stop: see
 # GuidancePlanner.__init__.)
 PREDICTED_STOP_FRACTION = 0.1
+
+
 @dataclass
 class DDPResult:
     stages: Stages
@@ -331,7 +333,8 @@ def ddp(st: Stages, sweep: str, dyn: bool, opts, stats: DDPStats, deadline: floa
         if opts.ddp_stop_on_prediction and it >= opts.ddp_min_iter and \
                 0.0 <= full_step_gain < PREDICTED_STOP_FRACTION * opts.tol_ddp and \
                 total_violation(p, st.X, st.U) <= opts.tol_aul:
-            return DDPResult(st, True, it - 1, "predicted cost decrease below tol_ddp / 10", rho, last)
+            return DDPResult(st, True, it - 1, "predicted cost decrease below tol_ddp / 10", rho,
+                             last)
         accepted = False
         a0 = alpha if dyn else 1.0
         t0 = time.perf_counter()

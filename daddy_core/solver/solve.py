@@ -151,7 +151,8 @@ def solve(problem, u_guess=None, method: str = "dyn", fuel_optimal: bool | None 
     if maps is not None and maps.N != problem.N:
         raise DaddyError(f"maps cover {maps.N} stages, the problem has {problem.N}")
     # a start for the Newton restoration only needs to be near (its residuals are exact): the
-    # maps then serve stages up to MAP_REACH radii (Earth-Mars re-plan rollout ~5 -> ~1 ms)
+    # maps then serve stages up to MAP_REACH radii (Earth-Mars bench re-plan: all 38 stages
+    # instead of 22, the other 16 integrated one by one; states within 1.1e-10 either way)
     reach = MAP_REACH if opts.restore_warm_start else 1.0
     X = problem.rollout(U0) if maps is None else maps.rollout(problem, U0, reach)[0]
     t_rollout = time.perf_counter() - t_start
