@@ -213,7 +213,7 @@ def _float_residual(problem, X, U, active_tol: float):
     return fx, float(np.max(np.concatenate(vals)))
 
 
-def _stage_maps(problem, maps: StageMaps | None, X, U, fx):
+def exact_valued_maps(problem, maps: StageMaps | None, X, U, fx):
     """Order-2 stage maps at (X[:-1], U) whose values are the exact float flows ``fx``.
 
     ``maps``: maps of a nearby trajectory (the previous outer iteration's, or given to
@@ -267,7 +267,7 @@ def polish(problem, X, U, opts, deadline: float | None = None,
         prev_dmax = dmax
         fresh = maps is None
         model = _Model(problem, X, U, opts.newton_active_tol,
-                       F=_stage_maps(problem, maps, X, U, fx))
+                       F=exact_valued_maps(problem, maps, X, U, fx))
         d = model.residual()
         scale = _column_weights(problem, U, opts.newton_control_weight_floor)
         try:

@@ -12,7 +12,7 @@ from ..integrators import prepared_control
 from .aul import aul
 from .ddp import DDPStats
 from .expansion import Multipliers, StageMaps, max_violation, total_violation
-from .newton import MAP_REACH, polish as newton_polish
+from .newton import MAP_REACH, exact_valued_maps, polish as newton_polish
 from .options import SolverOptions, parse_method
 from .solution import Solution
 
@@ -174,8 +174,7 @@ def solve(problem, u_guess=None, method: str = "dyn", fuel_optimal: bool | None 
                 # the DDP starts from the Newton model's maps, re-centred as Newton re-centres
                 # them (up to MAP_REACH radii: Earth-Mars re-plans, Jacobians within 1.5e-6 of
                 # fresh expansions either way), with the restored flows as their values
-                F0 = pres.maps.at(problem, X, U, reach=MAP_REACH)
-                F0.c[0] = X[1:].T
+                F0 = exact_valued_maps(problem, pres.maps, X, U, X[1:].T)
         elif maps is not None and reach > 1:
             X = maps.rollout(problem, U)[0]   # DDP starts from a consistent trajectory
         if progress:
