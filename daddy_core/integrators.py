@@ -285,3 +285,121 @@ def _rk78_single(rhs, x, u, t0, dt, tol, h0, max_steps, stats):
         stats["steps"] = n_steps
         stats["rhs_calls"] = 13 * n_steps
     return np.array(x)
+
+
+# ---------------------------------------------------------------------------------- DOP853
+# Hairer's Dormand-Prince 8(5,3) tableau as scipy ships it (the module solve_ivp's DOP853 uses)
+from scipy.integrate._ivp import dop853_coefficients as _dop  # noqa: E402
+
+_DOP_STAGES = _dop.N_STAGES   # 12 stages; the 13th derivative is f at the new point (FSAL)
+_DOP_ROWS = [[(j, float(a)) for j, a in enumerate(_dop.A[i, :i]) if a != 0.0]
+             for i in range(_DOP_STAGES)]
+_DOP_WEIGHTS = [(j, float(b)) for j, b in enumerate(_dop.B) if b != 0.0]
+_DOP_E5 = [(j, float(e)) for j, e in enumerate(_dop.E5) if e != 0.0]
+_DOP_E3 = [(j, float(e)) for j, e in enumerate(_dop.E3) if e != 0.0]
+_DOP_SAFETY, _DOP_MIN_FACTOR, _DOP_MAX_FACTOR = 0.9, 0.2, 10.0   # scipy's RungeKutta values
+_DOP_EXPONENT = -1.0 / 8.0   # -1 / (error estimator order 7 + 1)
+
+
+@functools.lru_cache(maxsize=None)
+def _dop853_step(nx: int):
+    """One DOP853 step of an nx-component float state as generated straight-line code (as
+    ``_single_step`` for RK78): ``step(rhs, state, t, x, f, u, h, rtol, atol) -> (x_new,
+    f_new, err)`` with x, f = rhs(t, x), x_new, f_new lists of nx floats and err scipy's
+    error norm (accept when < 1; NaN when the trial step met NaN dynamics)."""
+    comps = range(nx)
+
+    def combo(rows, m):   # (a_0 k_0,m + a_1 k_1,m + ...), scipy's K^T a order
+        return "(" + " + ".join(f"{a!r} * k{j}_{m}" for j, a in rows) + ")"
+
+    body = [f"x{m} = x[{m}]" for m in comps]
+    body.append(f"{', '.join(f'k0_{m}' for m in comps)}, = f")
+    for i in range(1, _DOP_STAGES):
+        xi = ", ".join(f"x{m} + {combo(_DOP_ROWS[i], m)} * h" for m in comps)
+        body.append(f"{', '.join(f'k{i}_{m}' for m in comps)}, = "
+                    f"_floats(rhs(t + {float(_dop.C[i])!r} * h, state([{xi}]), u))")
+    body += [f"y{m} = x{m} + {combo(_DOP_WEIGHTS, m)} * h" for m in comps]
+    body.append(f"fn = _floats(rhs(t + h, state([{', '.join(f'y{m}' for m in comps)}]), u))")
+    body.append(f"{', '.join(f'k{_DOP_STAGES}_{m}' for m in comps)}, = fn")
+    body += [f"s{m} = atol + max(abs(x{m}), abs(y{m})) * rtol" for m in comps]
+    body.append("e5 = " + " + ".join(f"({combo(_DOP_E5, m)} / s{m}) ** 2" for m in comps))
+    body.append("e3 = " + " + ".join(f"({combo(_DOP_E3, m)} / s{m}) ** 2" for m in comps))
+    body.append("err = 0.0 if e5 == 0.0 and e3 == 0.0 else "
+                f"abs(h) * e5 / _sqrt((e5 + 0.01 * e3) * {nx})")
+    body.append(f"return [{', '.join(f'y{m}' for m in comps)}], fn, err")
+    src = "def step(rhs, state, t, x, f, u, h, rtol, atol):\n" + "".join(
+        f"    {ln}\n" for ln in body)
+    namespace = {"_floats": _float_list, "_sqrt": math.sqrt}
+    exec(compile(src, f"<dop853 step, nx={nx}>", "exec"), namespace)
+    return namespace["step"]
+
+
+def dop853(rhs, x, u, t0, dt, rtol: float = 1e-12, atol: float = 1e-12, first_step=None,
+           max_steps: int = 100_000, stats: dict | None = None) -> np.ndarray:
+    """Integrate one float state with Dormand-Prince 8(5,3) (Hairer's DOP853): the scheme, error
+    norm and step control of ``scipy.integrate.solve_ivp(method="DOP853")``, in plain Python
+    floats with a generated straight-line step (solve_ivp's per-step numpy overhead is ~3x the
+    cost of a 7-component rhs). It serves as the independent check of the solver's RK78 maps.
+
+    Args:
+        rhs: rhs(t, x, u) -> dx/dt; receives lists of floats when it declares
+            ``scalar_components``, numpy arrays otherwise.
+        x: (nx,) initial state; u: control, constant over the interval (prepared here).
+        t0, dt: start time and interval length (normalised units; dt may be negative).
+        rtol, atol: scipy's relative and absolute tolerances.
+        first_step: first trial step (default |dt|: the whole interval, error control decides).
+        max_steps: bound on attempted steps before raising.
+        stats: optional dict receiving ``steps`` (accepted), ``rejected`` and ``rhs_calls``.
+    Returns:
+        (nx,) state at t0 + dt.
+    A trial step whose error norm is NaN (the dynamics returned NaN somewhere in it, e.g. a
+    whole-stage trial step through a singularity) is rejected and shrunk by the minimum factor,
+    as scipy does.
+
+    Raises:
+        DaddyError: the step fell below round-off of t (dynamics NaN or inf, or singular), or
+        max_steps was exceeded.
+    """
+    u = prepared_control(rhs, u)
+    scalar = getattr(rhs, "scalar_components", False)
+    state = list if scalar else np.array
+    uu = [float(v) for v in u] if scalar else u
+    x = [float(v) for v in x]
+    t0, dt = float(t0), float(dt)
+    t, t_end = t0, t0 + dt
+    direction = 1.0 if dt >= 0 else -1.0
+    h_abs = abs(dt) if first_step is None else abs(float(first_step))
+    step = _dop853_step(len(x))
+    f = _float_list(rhs(t, state(x), uu))
+    if len(f) != len(x):
+        raise DaddyError(f"dop853: rhs returned {len(f)} components for a state of {len(x)}")
+    accepted = rejected_total = 0
+    while direction * (t - t_end) < 0:
+        rejected = False
+        while True:
+            if accepted + rejected_total >= max_steps:
+                raise DaddyError(f"dop853 exceeded max_steps={max_steps}")
+            if h_abs < 10 * abs(math.nextafter(t, direction * math.inf) - t):
+                raise DaddyError(f"dop853: step size below round-off at t = {t!r} (NaN or inf "
+                                 "dynamics, or a singularity)")
+            t_new = t + h_abs * direction
+            if direction * (t_new - t_end) > 0:
+                t_new = t_end
+            h = t_new - t
+            h_abs = abs(h)
+            x_new, f_new, err = step(rhs, state, t, x, f, uu, h, rtol, atol)
+            if err < 1:
+                factor = (_DOP_MAX_FACTOR if err == 0 else
+                          min(_DOP_MAX_FACTOR, _DOP_SAFETY * err ** _DOP_EXPONENT))
+                h_abs *= min(1.0, factor) if rejected else factor
+                break
+            h_abs *= (_DOP_MIN_FACTOR if err != err   # NaN: scipy's max(0.2, nan) = 0.2
+                      else max(_DOP_MIN_FACTOR, _DOP_SAFETY * err ** _DOP_EXPONENT))
+            rejected = True
+            rejected_total += 1
+        t, x, f = t_new, x_new, f_new
+        accepted += 1
+    if stats is not None:
+        stats.update(steps=accepted, rejected=rejected_total,
+                     rhs_calls=1 + _DOP_STAGES * (accepted + rejected_total))
+    return np.array(x)

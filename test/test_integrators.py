@@ -1,4 +1,5 @@
-"""RK78 (and RK4) against scipy's DOP853 at rtol = atol = 1e-12 on every model."""
+"""RK78 (and RK4) against scipy's DOP853 at rtol = atol = 1e-12 on every model; our DOP853 (the
+solver's re-propagation check) against scipy's."""
 import numpy as np
 import pytest
 from scipy.integrate import solve_ivp
@@ -6,7 +7,7 @@ from scipy.integrate import solve_ivp
 from daddy_core.dynamics import models
 from daddy_core.dynamics.units import earth_units
 from daddy_core.errors import DaddyError
-from daddy_core.integrators import rk4, rk78
+from daddy_core.integrators import dop853, rk4, rk78
 from daddy_core.problems import load_case
 
 
@@ -120,6 +121,39 @@ def test_integrator_errors():
         rk4(rhs, np.ones(2), None, 0.0, 1.0, steps=0)
     with pytest.raises(DaddyError, match="tol"):
         rk78(rhs, np.ones(2), None, 0.0, 1.0, tol=0)
+
+
+@pytest.mark.parametrize("name", ["earth_mars", "halo_l2_l1", "leo_leo"])
+@pytest.mark.parametrize("sign", [1.0, -1.0])
+def test_dop853_takes_scipys_steps(name, sign):
+    """Same scheme and step control as solve_ivp(method="DOP853"): the same number of rhs
+    calls and the same state to round-off, forwards and backwards, on float lists (scalar
+    components) and arrays (the equinoctial model) alike."""
+    case = load_case(name)
+    rhs = case.rhs()
+    T = sign * case.tof / 8
+    u = np.array([0.3, -0.2, 0.1]) * (0.5 / case.units.thrust_unit_n)
+    up = np.asarray(models.with_thrust_magnitude(u))
+    stats = {}
+    with np.errstate(invalid="ignore"):   # LEO: the whole-interval trial steps meet NaN, rejected
+        ref = solve_ivp(lambda t, x: np.asarray(rhs(t, x, up), dtype=float), (0.0, T), case.x0,
+                        method="DOP853", rtol=1e-12, atol=1e-12, first_step=abs(T))
+        x = dop853(rhs, case.x0, u, 0.0, T, stats=stats)
+        again = dop853(rhs, case.x0, u, 0.0, T, first_step=abs(T))
+    assert stats["rhs_calls"] == ref.nfev and stats["steps"] == len(ref.t) - 1
+    assert np.max(np.abs(x - ref.y[:, -1]) / np.maximum(1.0, np.abs(ref.y[:, -1]))) < 1e-13
+    # and the default first step (the whole interval) is the one passed to scipy above
+    np.testing.assert_array_equal(again, x)
+
+
+def test_dop853_errors():
+    with pytest.raises(DaddyError, match=r"round-off at t = 0\.(29999|3)"):   # NaN from t = 0.3 on
+        dop853(lambda t, x, u: np.array([0.0, 1.0, np.nan if t > 0.3 else 0.0]), np.ones(3),
+               np.zeros(1), 0.0, 1.0)
+    with pytest.raises(DaddyError, match="4 components for a state of 3"):
+        dop853(lambda t, x, u: np.ones(4), np.ones(3), np.zeros(1), 0.0, 1.0)
+    with pytest.raises(DaddyError, match="max_steps=3"):
+        dop853(lambda t, x, u: x, np.ones(1), np.zeros(1), 0.0, 50.0, max_steps=3)
 
 
 @pytest.mark.parametrize("derivative_tol", [None, 1e-8])

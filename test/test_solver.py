@@ -259,3 +259,14 @@ def test_regularised_inverse_matches_numpy_and_rejects_indefinite(nu):
     assert _regularised_inverse(indefinite, 0.5) is None
     assert _regularised_inverse(indefinite, 1.5) is not None
     assert _regularised_inverse(np.full((nu, nu), np.nan), 1.0) is None
+
+
+def test_repropagation_miss_is_inf_when_the_check_fails():
+    """The DOP853 check cannot vouch for a schedule it cannot fly: NaN controls (or dynamics)
+    give an infinite miss, never a miss computed on a partial trajectory."""
+    from daddy_core.solver import repropagation_miss
+    prob = problem_from_case(load_case("earth_mars"))
+    U = np.zeros((prob.N, 3))
+    assert np.isfinite(repropagation_miss(prob, U))
+    U[prob.N // 2, 0] = np.nan
+    assert repropagation_miss(prob, U) == np.inf

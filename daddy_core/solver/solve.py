@@ -2,13 +2,13 @@
 polishing; validation of inputs before any iteration; the Solution with its figures."""
 from __future__ import annotations
 
+import math
 import time
 
 import numpy as np
-from scipy.integrate import solve_ivp
 
 from ..errors import DaddyError
-from ..integrators import prepared_control
+from ..integrators import dop853
 from .aul import aul
 from .ddp import DDPStats
 from .expansion import Multipliers, StageMaps, max_violation, total_violation
@@ -68,27 +68,23 @@ def validate(problem, U0: np.ndarray) -> np.ndarray:
 
 def repropagation_miss(problem, U: np.ndarray) -> float | None:
     """Terminal miss (max terminal-constraint violation) after re-propagating U from x0 with
-    DOP853 at rtol = atol = 1e-12, stage by stage.
+    DOP853 at rtol = atol = 1e-12, stage by stage (``integrators.dop853``: solve_ivp's scheme and
+    step control, 3x cheaper); inf when the re-propagation fails (NaN or inf dynamics).
 
     Each stage's first trial step is the whole stage (scipy's initial-step heuristic costs two
     rhs calls and usually picks a step that needs more steps: halo 62 -> 41 ms, Earth-Mars 24 ->
-    18 ms per check); the error control still accepts only steps within the tolerances."""
+    18 ms per check with solve_ivp); the error control still accepts only steps within the
+    tolerances."""
     if problem.rhs is None:
         x = problem.rollout(U)[-1]
     else:
-        rhs = problem.rhs
-        # a rhs that reads its arguments by index runs ~3x faster on Python floats (rk78's note)
-        scalar = getattr(rhs, "scalar_components", False)
         x = problem.x0.copy()
-        for k in range(problem.N):
-            uk = prepared_control(rhs, U[k])   # (the thrust magnitude once per stage)
-            if scalar:
-                fun = (lambda t, y, uk=np.asarray(uk).tolist(): rhs(t, y.tolist(), uk))
-            else:
-                fun = (lambda t, y, uk=uk: rhs(t, y, uk))
-            sol = solve_ivp(fun, (0.0, problem.stage_dt[k]), x, method="DOP853", rtol=1e-12,
-                            atol=1e-12, first_step=problem.stage_dt[k])
-            x = sol.y[:, -1]
+        try:
+            for k in range(problem.N):
+                x = dop853(problem.rhs, x, U[k], 0.0, problem.stage_dt[k], rtol=1e-12,
+                           atol=1e-12)
+        except DaddyError:
+            return math.inf
     gt, nti = problem.terminal_constraints(x)
     if gt is None:
         return None
