@@ -291,7 +291,7 @@ def _rk78_single(rhs, x, u, t0, dt, tol, h0, max_steps, stats):
 # Hairer's Dormand-Prince 8(5,3) tableau as scipy ships it (the module solve_ivp's DOP853 uses)
 from scipy.integrate._ivp import dop853_coefficients as _dop  # noqa: E402
 
-_DOP_STAGES = _dop.N_STAGES   # 12 stages; the 13th derivative is f at the new point (FSAL)
+_DOP_STAGES = _dop.N_STAGES   # 12 stages, then f at the new point (FSAL; not in the error)
 _DOP_ROWS = [[(j, float(a)) for j, a in enumerate(_dop.A[i, :i]) if a != 0.0]
              for i in range(_DOP_STAGES)]
 _DOP_WEIGHTS = [(j, float(b)) for j, b in enumerate(_dop.B) if b != 0.0]
@@ -320,7 +320,6 @@ def _dop853_step(nx: int):
                     f"_floats(rhs(t + {float(_dop.C[i])!r} * h, state([{xi}]), u))")
     body += [f"y{m} = x{m} + {combo(_DOP_WEIGHTS, m)} * h" for m in comps]
     body.append(f"fn = _floats(rhs(t + h, state([{', '.join(f'y{m}' for m in comps)}]), u))")
-    body.append(f"{', '.join(f'k{_DOP_STAGES}_{m}' for m in comps)}, = fn")
     body += [f"s{m} = atol + max(abs(x{m}), abs(y{m})) * rtol" for m in comps]
     body.append("e5 = " + " + ".join(f"({combo(_DOP_E5, m)} / s{m}) ** 2" for m in comps))
     body.append("e3 = " + " + ".join(f"({combo(_DOP_E3, m)} / s{m}) ** 2" for m in comps))
