@@ -55,8 +55,8 @@ PARAMETERS = {  # name: (default, description)
     "time_budget_s": (60.0, "wall-clock budget of one re-optimisation [s]"),
     "restore_first": (True, "restore feasibility of the warm start by Newton before DDP, so a "
                             "re-optimisation stopped by its budget still yields a feasible plan "
-                            "(and faster: bench re-plans Earth-Mars 63 / halo 137 ms, without it "
-                            "85 / 358 ms)"),
+                            "(and faster: bench re-plans Earth-Mars 45 / halo 96 ms, without it "
+                            "64 / 292 ms)"),
     "arrival_tolerance_m": (0.0, "in the arrival phase (the last re-gridded stages) the terminal "
                                  "position may be this far from the target, the velocity stays "
                                  "exact [m]; 0: position exact too"),

@@ -171,7 +171,7 @@ class GuidancePlanner:
         # iterations instead of 4-5 and end 0-2 g heavier.
         # Not used: SolverOptions.ddp_stop_on_prediction (DDP stops before a step whose
         # predicted decrease is below a tenth of tol_ddp). It makes the Earth-Mars bench
-        # re-plan 41 ms instead of ~60 (no step, no polishing from the restored start), but the
+        # re-plan ~20 ms faster (no step, no polishing from the restored start), but the
         # closed-loop halo Monte Carlo (seeds 1-100) went 100/100 -> 99/100 (an arrival miss
         # of 1.90 cm/s; 1.05 and 1.16 cm/s at tol_ddp itself) and its median propellant
         # 26.765 -> 26.802 kg: the skipped steps are what keeps the plans optimal.
