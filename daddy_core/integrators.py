@@ -9,6 +9,8 @@ integrate in one call.
 * ``rk78``: Runge-Kutta-Fehlberg 7(8) (Fehlberg 1968, NASA TR R-287) with adaptive steps, each
   batch element on its own step sequence; the error estimate and the step choice use only the
   constant part of a DA state, so the expansion follows the same steps as the float trajectory.
+* ``dop853``: Dormand-Prince 8(5,3) for one float state, solve_ivp's DOP853 step for step (the
+  solver's independent re-propagation check).
 """
 from __future__ import annotations
 
@@ -17,6 +19,9 @@ import math
 from fractions import Fraction as F
 
 import numpy as np
+# Hairer's Dormand-Prince 8(5,3) tableau as scipy ships it (the one solve_ivp's DOP853 uses;
+# test_integrators checks our steps against solve_ivp's)
+from scipy.integrate._ivp import dop853_coefficients as _dop
 
 from .da import functions as dm
 from .da.core import DA
@@ -288,9 +293,6 @@ def _rk78_single(rhs, x, u, t0, dt, tol, h0, max_steps, stats):
 
 
 # ---------------------------------------------------------------------------------- DOP853
-# Hairer's Dormand-Prince 8(5,3) tableau as scipy ships it (the module solve_ivp's DOP853 uses)
-from scipy.integrate._ivp import dop853_coefficients as _dop  # noqa: E402
-
 _DOP_STAGES = _dop.N_STAGES   # 12 stages, then f at the new point (FSAL; not in the error)
 _DOP_ROWS = [[(j, float(a)) for j, a in enumerate(_dop.A[i, :i]) if a != 0.0]
              for i in range(_DOP_STAGES)]
@@ -340,6 +342,10 @@ def dop853(rhs, x, u, t0, dt, rtol: float = 1e-12, atol: float = 1e-12, first_st
     floats with a generated straight-line step (solve_ivp's per-step numpy overhead is ~3x the
     cost of a 7-component rhs). It serves as the independent check of the solver's RK78 maps.
 
+    A trial step whose error norm is NaN (the dynamics returned NaN somewhere in it, e.g. a
+    whole-stage trial step through a singularity) is rejected and shrunk by the minimum factor,
+    as scipy does.
+
     Args:
         rhs: rhs(t, x, u) -> dx/dt; receives lists of floats when it declares
             ``scalar_components``, numpy arrays otherwise.
@@ -351,10 +357,6 @@ def dop853(rhs, x, u, t0, dt, rtol: float = 1e-12, atol: float = 1e-12, first_st
         stats: optional dict receiving ``steps`` (accepted), ``rejected`` and ``rhs_calls``.
     Returns:
         (nx,) state at t0 + dt.
-    A trial step whose error norm is NaN (the dynamics returned NaN somewhere in it, e.g. a
-    whole-stage trial step through a singularity) is rejected and shrunk by the minimum factor,
-    as scipy does.
-
     Raises:
         DaddyError: the step fell below round-off of t (dynamics NaN or inf, or singular), or
         max_steps was exceeded.

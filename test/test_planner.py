@@ -260,3 +260,19 @@ def test_warm_replan_from_a_restored_start_can_skip_a_negligible_ddp_step():
         assert (sol.runtime_s["newton"] == 0.0) == stop   # nothing left to polish
         masses[stop] = sol.final_mass_kg
     assert abs(masses[True] - masses[False]) < 1e-3
+
+
+def test_a_plan_that_fails_its_repropagation_is_never_adopted(monkeypatch):
+    """A solve whose DOP853 check failed (infinite miss) is not safe to fly: ERROR, and the
+    last valid plan stays (on every rung of the margin ladder)."""
+    import sys
+    solve_mod = sys.modules["daddy_core.solver.solve"]   # (the package exports solve(), too)
+    pl = GuidancePlanner("earth_mars")
+    plan = pl.load_plan(PLANS_DIR / "earth_mars_fuel.json", T0_S)
+    monkeypatch.setattr(solve_mod, "repropagation_miss", lambda problem, U: np.inf)
+    k = 5
+    t = plan.epoch_s + np.sum(plan.stage_dt_s[:k])
+    s = plan.states_si[k]
+    out = pl.replan(s[:3], s[3:6], s[6], t, "r1", now_s=t)
+    assert not out.ok and out.level == "ERROR" and "re-propagated" in out.reason
+    assert pl.plan is plan

@@ -270,3 +270,7 @@ def test_repropagation_miss_is_inf_when_the_check_fails():
     assert np.isfinite(repropagation_miss(prob, U))
     U[prob.N // 2, 0] = np.nan
     assert repropagation_miss(prob, U) == np.inf
+    # a Solution that records it keeps it through strict JSON
+    sol = solve_case("double_integrator")
+    sol.repropagation_miss = np.inf
+    assert Solution.from_json(sol.to_json()).repropagation_miss == np.inf

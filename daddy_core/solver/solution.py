@@ -25,7 +25,8 @@ class Solution:
         max_violation: max constraint violation (normalised; inequality max(g, 0), |g| else).
         final_mass_kg, propellant_kg: mass figures (None without a mass state).
         repropagation_miss: terminal miss after re-propagating U from x0 with DOP853 at
-            rtol = atol = 1e-12 (normalised, over the terminal-constraint components).
+            rtol = atol = 1e-12 (normalised, over the terminal-constraint components); inf
+            when the re-propagation failed (JSON: the string "inf").
         iterations: {homotopy, aul, ddp, newton}; runtime_s: {total, ddp, newton, ...}.
         history: per-homotopy-step summaries; units: {lu_km, tu_s, mu_kg, thrust_unit_n}.
         stage_maps: the last stage maps (``StageMaps``), in memory only (not in JSON/NPZ): a
@@ -84,6 +85,8 @@ class Solution:
              if f.name not in self._ARRAYS + ("stage_maps",)}
         for k in self._ARRAYS:
             d[k] = np.asarray(getattr(self, k)).tolist()
+        if d["repropagation_miss"] == np.inf:   # strict JSON has no infinity
+            d["repropagation_miss"] = "inf"
         if self.units.get("thrust_unit_n"):
             d["U_N"] = self.U_newton.tolist()
             d["X_SI"] = self.X_si.tolist()
@@ -103,6 +106,8 @@ class Solution:
             if k not in kw:
                 raise DaddyError(f"solution field {k!r} is missing")
             kw[k] = np.asarray(kw[k], dtype=float)
+        if kw.get("repropagation_miss") == "inf":
+            kw["repropagation_miss"] = np.inf
         return cls(**kw)
 
     @classmethod

@@ -257,6 +257,8 @@ def solve(problem, u_guess=None, method: str = "dyn", fuel_optimal: bool | None 
     t0 = time.perf_counter()
     miss = repropagation_miss(problem, U)
     t_repro = time.perf_counter() - t0
+    if miss is not None and not math.isfinite(miss):
+        converged, reason = False, "the DOP853 re-propagation of the final controls failed"
     sol = Solution(
         case=case_name or problem.name, method=method, fuel_optimal=fuel, converged=converged,
         reason=reason, X=X, U=U, stage_dt=problem.stage_dt.copy(),
