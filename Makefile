@@ -9,6 +9,7 @@ PYTHON ?= python3
 VENV := .venv
 PY := $(VENV)/bin/python
 STAMP := $(VENV)/.bootstrapped
+PLOTS := $(VENV)/.plots
 PIP := $(PY) -m pip install --disable-pip-version-check -q -c requirements/pins.txt
 
 # Every rclpy process: discovery on loopback only, a per-run domain, logs in a temp dir.
@@ -35,11 +36,17 @@ $(STAMP): requirements/pins.txt requirements/core.txt requirements/ros.txt setup
 	$(PY) -m pip install --disable-pip-version-check -q --no-deps -e .; \
 	touch $@
 
+# The plots extra (matplotlib): the demo's figure; the tests check it. Without it (e.g. an offline
+# machine) everything runs and the demo says it skipped its plot.
+$(PLOTS): $(STAMP) requirements/plots.txt
+	@$(PIP) -r requirements/plots.txt && touch $@ || \
+	  echo "plots: matplotlib could not be installed; the demo will skip its plot"
+
 DEMO_CASE ?= halo_l2_l1
-demo: $(STAMP)
+demo: $(STAMP) $(PLOTS)
 	$(VENV)/bin/gnc_demo --case $(DEMO_CASE)
 
-test: $(STAMP)
+test: $(STAMP) $(PLOTS)
 	$(PY) -m pytest -q test
 
 test-slow: $(STAMP)

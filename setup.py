@@ -18,6 +18,7 @@ setup(
         ("share/" + package_name + "/launch", glob("launch/*.py")),
     ],
     install_requires=["setuptools", "numpy", "scipy"],
+    extras_require={"plots": ["matplotlib"]},
     zip_safe=True,
     maintainer="daddy team",
     maintainer_email="daddy@example.invalid",

@@ -223,10 +223,11 @@ def fly(link, sim: TruthSim, planner: GuidancePlanner, replan_every: int, subste
     schedule is flown piecewise constant between its stage starts. Besides the grid's
     re-optimisations, one is asked for at any step whose estimate has drifted from the loop's
     prediction by more than ``trigger_pos_m`` / ``trigger_vel_m_s`` (``DeviationMonitor``).
-    Returns the run's figures."""
+    Returns the run's figures, the flown positions at the grid's times (``flown_m``, (K, 3) m)
+    and the thrust actually applied (``thrust_log``: (t_s, |thrust| N) from each piece on)."""
     N = planner.base_problem.N
     dt_stage = sim.tof_s / N
-    latencies, levels, flown = [], [], [sim.truth_si()[0]]
+    latencies, levels, flown, thrust_log = [], [], [sim.truth_si()[0]], []
     monitor = DeviationMonitor(sim, trigger_pos_m, trigger_vel_m_s)
     monitor.reset(*sim.estimate_si())
     triggered = 0
@@ -251,7 +252,8 @@ def fly(link, sim: TruthSim, planner: GuidancePlanner, replan_every: int, subste
         cuts = [t0, *starts[(starts > t0 + 1e-6) & (starts < t1 - 1e-6)], t1]
         for a, b in zip(cuts[:-1], cuts[1:]):
             thrust = link.thrust_at(a, pos, vel, mass)
-            sim.apply(thrust, b - a)
+            applied = sim.apply(thrust, b - a)
+            thrust_log.append((a, float(np.linalg.norm(applied))))
             monitor.advance(thrust, b - a)
         flown.append(sim.truth_si()[0])
     miss_r, miss_v = sim.miss()
@@ -259,7 +261,7 @@ def fly(link, sim: TruthSim, planner: GuidancePlanner, replan_every: int, subste
     return {"miss_km": miss_r / 1e3, "miss_cm_s": miss_v * 100, "final_mass_kg": m_final,
             "replans": len(latencies), "triggered": triggered,
             "latency_ms": [1e3 * x for x in latencies],
-            "levels": levels, "flown_m": np.array(flown)}
+            "levels": levels, "flown_m": np.array(flown), "thrust_log": np.array(thrust_log)}
 
 
 def nominal_planner(case: str, time_budget_s: float,
@@ -357,6 +359,7 @@ def _monte_carlo_run(job) -> dict:
     sim = TruthSim(args.case, errors, seed=seed, t0_s=T0_S)
     r = fly(DirectLink(pl), sim, pl, **_loop_settings(args))
     r.pop("flown_m")
+    r.pop("thrust_log")
     return r
 
 
@@ -400,7 +403,7 @@ def _ros_demo(args, planner, errors, m_open, m0) -> int:
           f"coalesced triggers: {guidance.coalesced}")
     if args.plot:
         try:
-            _plot(r, planner, args.plot)
+            plot_closed_loop(r, planner.plan, args.plot)
             print(f"plot: {args.plot}")
         except ImportError:
             print("plot skipped: matplotlib not installed (optional extra)")
@@ -418,23 +421,40 @@ def _print_summary(s: dict) -> None:
           f"({s['success_rate']:.0%})")
 
 
-def _plot(r, planner, path):
+def plot_closed_loop(r: dict, plan, path) -> None:
+    """PNG of a closed-loop run against the open-loop ``plan`` it started from: the flown and
+    planned trajectories (x-y, km, the case's frame) and the thrust magnitude actually applied
+    (execution errors included) and planned, over days since departure.
+
+    Raises ImportError without matplotlib (the plots extra)."""
     import matplotlib
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
     Path(path).parent.mkdir(parents=True, exist_ok=True)
-    plan = planner.plan
     fig, (a1, a2) = plt.subplots(1, 2, figsize=(11, 4.5))
-    f = r["flown_m"] / 1e3
+    exp3 = max(0, 3 * int(np.log10(np.max(np.abs(plan.states_si[:, :2])) / 1e3) // 3))
+    scale = 1e3 * 10.0 ** exp3   # km, 10^3 km or 10^6 km: short tick labels
+    unit = "km" if exp3 == 0 else f"$10^{exp3}$ km"
+    p = plan.states_si[:, :3] / scale
+    a1.plot(p[:, 0], p[:, 1], "--", label="open-loop plan")
+    f = r["flown_m"] / scale
     a1.plot(f[:, 0], f[:, 1], label="flown")
-    p = plan.states_si[:, :3] / 1e3
-    a1.plot(p[:, 0], p[:, 1], "--", label="last plan")
-    a1.set_xlabel("x [km]")
-    a1.set_ylabel("y [km]")
+    a1.plot(f[-1, 0], f[-1, 1], "r*", label="arrival")
+    a1.set_xlabel(f"x [{unit}]")
+    a1.set_ylabel(f"y [{unit}]")
+    a1.axis("equal")
     a1.legend()
-    a2.step(plan.stage_start_s / 86400, np.linalg.norm(plan.thrust_n, axis=1), where="post")
-    a2.set_xlabel("time since last plan epoch [d]")
+    day = 86400.0
+    start = plan.stage_start_s
+    thrust = np.linalg.norm(plan.thrust_n, axis=1)
+    a2.step(np.append(start, plan.end_s - plan.epoch_s) / day, np.append(thrust, thrust[-1]),
+            "--", where="post", label="open-loop plan")
+    log = r["thrust_log"]
+    a2.step((log[:, 0] - plan.epoch_s) / day, log[:, 1], where="post", label="applied",
+            linewidth=0.8)
+    a2.set_xlabel("time since departure [d]")
     a2.set_ylabel("thrust [N]")
+    a2.legend()
     fig.tight_layout()
     fig.savefig(path, dpi=110)
     plt.close(fig)

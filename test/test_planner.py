@@ -276,3 +276,17 @@ def test_a_plan_that_fails_its_repropagation_is_never_adopted(monkeypatch):
     out = pl.replan(s[:3], s[3:6], s[6], t, "r1", now_s=t)
     assert not out.ok and out.level == "ERROR" and "re-propagated" in out.reason
     assert pl.plan is plan
+
+
+def test_demo_plot_is_a_png_of_flown_and_planned(planner, tmp_path):
+    """The demo's figure (matplotlib: the plots extra, installed by make demo / make test)."""
+    pytest.importorskip("matplotlib")
+    from daddy_ros.demo import plot_closed_loop
+    plan = planner.plan
+    r = {"flown_m": plan.states_si[:, :3] * 1.001,
+         "thrust_log": np.column_stack([plan.epoch_s + plan.stage_start_s,
+                                        np.linalg.norm(plan.thrust_n, axis=1)])}
+    path = tmp_path / "out" / "demo.png"
+    plot_closed_loop(r, plan, path)
+    data = path.read_bytes()
+    assert data[:8] == b"\x89PNG\r\n\x1a\n" and len(data) > 20_000
