@@ -406,7 +406,7 @@ def _ros_demo(args, planner, errors, m_open, m0) -> int:
             plot_closed_loop(r, planner.plan, args.plot)
             print(f"plot: {args.plot}")
         except ImportError:
-            print("plot skipped: matplotlib not installed (optional extra)")
+            print("plot skipped: matplotlib not installed (the plots extra; make demo installs it)")
     return 0
 
 
