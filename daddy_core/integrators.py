@@ -250,6 +250,15 @@ def _single_step(nx: int):
     return namespace["step"]
 
 
+def _plain_float_args(rhs, x, u):
+    """(state, u, x) for the plain-Python single-state integrators: ``state`` turns a list of
+    floats into what rhs receives (the list itself for a rhs flagged ``scalar_components``,
+    else a numpy array), u as rhs receives it, x as a list of floats."""
+    if getattr(rhs, "scalar_components", False):
+        return list, [float(v) for v in u], [float(v) for v in x]
+    return np.array, u, [float(v) for v in x]
+
+
 def _rk78_single(rhs, x, u, t0, dt, tol, h0, max_steps, stats):
     """RK78 for one float state: same scheme and step control as the batched path, in plain
     Python floats (the Std/Dyn forward passes integrate one 7-component state at a time, where
@@ -258,10 +267,7 @@ def _rk78_single(rhs, x, u, t0, dt, tol, h0, max_steps, stats):
     A right-hand side flagged ``rhs.scalar_components = True`` (it reads x and u only by integer
     index, like the catalogue models) receives lists of Python floats, whose arithmetic costs a
     third of numpy scalars'; any other receives numpy arrays, as documented for ``rk78``."""
-    scalar = getattr(rhs, "scalar_components", False)
-    state = list if scalar else np.array
-    uu = [float(v) for v in u] if scalar else u
-    x = [float(v) for v in x]
+    state, uu, x = _plain_float_args(rhs, x, u)
     step = _single_step(len(x))
     t, t_end = t0, t0 + dt
     direction = 1.0 if dt >= 0 else -1.0
@@ -362,10 +368,7 @@ def dop853(rhs, x, u, t0, dt, rtol: float = 1e-12, atol: float = 1e-12, first_st
         max_steps was exceeded.
     """
     u = prepared_control(rhs, u)
-    scalar = getattr(rhs, "scalar_components", False)
-    state = list if scalar else np.array
-    uu = [float(v) for v in u] if scalar else u
-    x = [float(v) for v in x]
+    state, uu, x = _plain_float_args(rhs, x, u)
     t0, dt = float(t0), float(dt)
     t, t_end = t0, t0 + dt
     direction = 1.0 if dt >= 0 else -1.0

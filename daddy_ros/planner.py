@@ -461,10 +461,10 @@ class GuidancePlanner:
             excess = float(np.max(mags / umax)) - 1.0
         else:
             excess = 0.0
-        # the solver's own trajectory, independently re-propagated (DOP853) by solve(), serves
-        # as is; controls changed by the saturation beyond round-off are rolled out again
         if sol.repropagation_miss == np.inf:
             return False, False, "solution could not be re-propagated (DOP853)", None, np.inf
+        # the solver's own trajectory, independently re-propagated (DOP853) by solve(), serves
+        # as is; controls changed by the saturation beyond round-off are rolled out again
         if excess > 1e-9 or sol.repropagation_miss is None:
             X, repro = problem.rollout(U), 0.0
         else:
