@@ -25,6 +25,7 @@ from scipy.integrate._ivp import dop853_coefficients as _dop
 
 from .da import functions as dm
 from .da.core import DA
+from .dynamics.rhs import Dynamics, as_dynamics
 from .errors import DaddyError
 
 # ---------------------------------------------------------------------------------- RKF7(8)
@@ -85,14 +86,6 @@ class _Stages:
         return DA(out, self.T) if self.is_da else out
 
 
-def prepared_control(rhs, u):
-    """``rhs.prepare_control(u)`` if the right-hand side declares one, else u: what depends on
-    the control only (constant over an integration) is computed once, not at every stage (the
-    catalogue models append the thrust magnitude, ``models.with_thrust_magnitude``)."""
-    prepare = getattr(rhs, "prepare_control", None)
-    return u if prepare is None or u is None else prepare(u)
-
-
 _RK4_A = [[], [0.5], [0.0, 0.5], [0.0, 0.0, 1.0]]
 _RK4_B = [1 / 6, 1 / 3, 1 / 3, 1 / 6]
 
@@ -101,7 +94,7 @@ def rk4(rhs, x, u, t0, dt, steps: int = 20):
     """Integrate ``rhs`` over ``dt`` with ``steps`` fixed RK4 steps.
 
     Args:
-        rhs: rhs(t, x, u) -> dx/dt.
+        rhs: a ``dynamics.Dynamics`` or a plain rhs(t, x, u) -> dx/dt.
         x: (nx, *batch) initial state (array or DA).
         u: (nu, *batch) control, constant over the interval.
         t0: start time (scalar or batch array).
@@ -112,7 +105,8 @@ def rk4(rhs, x, u, t0, dt, steps: int = 20):
     """
     if steps < 1:
         raise DaddyError(f"rk4 steps must be >= 1, got {steps}")
-    u = prepared_control(rhs, u)
+    dyn = as_dynamics(rhs)
+    rhs, u = dyn.f, dyn.prepared(u)
     h = np.asarray(dt, dtype=float) / steps
     t = np.asarray(t0, dtype=float)
     for _ in range(steps):
@@ -148,11 +142,12 @@ def rk78(rhs, x, u, t0, dt, tol: float = 1e-13, h0=None, max_steps: int = 10_000
     """
     if not tol > 0:
         raise DaddyError(f"rk78 tol must be > 0, got {tol}")
-    u = prepared_control(rhs, u)
+    dyn = as_dynamics(rhs)
+    u = dyn.prepared(u)
     real = (isinstance(x, np.ndarray) and x.dtype.kind == "f"
             and np.asarray(u).dtype.kind in "fiu")   # not DA, not complex (complex-step tests)
     if real and x.ndim == 1 and np.ndim(dt) == 0 and np.ndim(t0) == 0:
-        return _rk78_single(rhs, x, u, float(t0), float(dt), tol, h0, max_steps, stats)
+        return _rk78_single(dyn, x, u, float(t0), float(dt), tol, h0, max_steps, stats)
     if real and x.ndim == 2 and x.shape[1] <= _SINGLE_BATCH and stats is None:
         # a few float states: one at a time in plain Python beats numpy on (nx, B) arrays
         # (Earth-Mars, one stage: ~0.6 ms instead of ~5 ms); same steps as the batched path
@@ -160,9 +155,10 @@ def rk78(rhs, x, u, t0, dt, tol: float = 1e-13, h0=None, max_steps: int = 10_000
         u, t0, dt = (np.broadcast_to(np.asarray(v, dtype=float), s) for v, s in
                      ((u, (np.shape(u)[0], B)), (t0, (B,)), (dt, (B,))))
         hb = None if h0 is None else np.broadcast_to(np.asarray(h0, dtype=float), (B,))
-        return np.stack([_rk78_single(rhs, x[:, j], u[:, j], float(t0[j]), float(dt[j]), tol,
+        return np.stack([_rk78_single(dyn, x[:, j], u[:, j], float(t0[j]), float(dt[j]), tol,
                                       None if hb is None else hb[j], max_steps, None)
                          for j in range(B)], axis=1)
+    rhs = dyn.f
     x0 = dm.cons(x)
     batch = x0.shape[1:]
     dt = np.broadcast_to(np.asarray(dt, dtype=float), batch).copy()
@@ -250,24 +246,24 @@ def _single_step(nx: int):
     return namespace["step"]
 
 
-def _plain_float_args(rhs, x, u):
-    """(state, u, x) for the plain-Python single-state integrators: ``state`` turns a list of
-    floats into what rhs receives (the list itself for a rhs flagged ``scalar_components``,
-    else a numpy array), u as rhs receives it, x as a list of floats."""
-    if getattr(rhs, "scalar_components", False):
-        return list, [float(v) for v in u], [float(v) for v in x]
-    return np.array, u, [float(v) for v in x]
+def _plain_float_args(dyn: Dynamics, x, u):
+    """(f, state, u, x) for the plain-Python single-state integrators: the rhs function,
+    ``state`` turning a list of floats into what it receives (the list itself when it has
+    ``scalar_components``, else a numpy array), u as it receives it, x as a list of floats."""
+    if dyn.scalar_components:
+        return dyn.f, list, [float(v) for v in u], [float(v) for v in x]
+    return dyn.f, np.array, u, [float(v) for v in x]
 
 
-def _rk78_single(rhs, x, u, t0, dt, tol, h0, max_steps, stats):
+def _rk78_single(dyn: Dynamics, x, u, t0, dt, tol, h0, max_steps, stats):
     """RK78 for one float state: same scheme and step control as the batched path, in plain
     Python floats (the Std/Dyn forward passes integrate one 7-component state at a time, where
     every numpy call is overhead), one generated straight-line step (``_single_step``).
 
-    A right-hand side flagged ``rhs.scalar_components = True`` (it reads x and u only by integer
-    index, like the catalogue models) receives lists of Python floats, whose arithmetic costs a
-    third of numpy scalars'; any other receives numpy arrays, as documented for ``rk78``."""
-    state, uu, x = _plain_float_args(rhs, x, u)
+    A right-hand side with ``Dynamics.scalar_components`` (it reads x and u only by integer
+    index, like the catalogue models) receives lists of Python floats; any other receives numpy
+    arrays, as documented for ``rk78``. ``u`` is prepared already."""
+    rhs, state, uu, x = _plain_float_args(dyn, x, u)
     step = _single_step(len(x))
     t, t_end = t0, t0 + dt
     direction = 1.0 if dt >= 0 else -1.0
@@ -353,8 +349,8 @@ def dop853(rhs, x, u, t0, dt, rtol: float = 1e-12, atol: float = 1e-12, first_st
     as scipy does.
 
     Args:
-        rhs: rhs(t, x, u) -> dx/dt; receives lists of floats when it declares
-            ``scalar_components``, numpy arrays otherwise.
+        rhs: a ``Dynamics`` or a plain rhs(t, x, u) -> dx/dt; receives lists of floats when
+            it has ``scalar_components``, numpy arrays otherwise.
         x: (nx,) initial state; u: control, constant over the interval (prepared here).
         t0, dt: start time and interval length (normalised units; dt may be negative).
         rtol, atol: scipy's relative and absolute tolerances.
@@ -367,8 +363,8 @@ def dop853(rhs, x, u, t0, dt, rtol: float = 1e-12, atol: float = 1e-12, first_st
         DaddyError: the step fell below round-off of t (dynamics NaN or inf, or singular), or
         max_steps was exceeded.
     """
-    u = prepared_control(rhs, u)
-    state, uu, x = _plain_float_args(rhs, x, u)
+    dyn = as_dynamics(rhs)
+    rhs, state, uu, x = _plain_float_args(dyn, x, dyn.prepared(u))
     t0, dt = float(t0), float(dt)
     t, t_end = t0, t0 + dt
     direction = 1.0 if dt >= 0 else -1.0

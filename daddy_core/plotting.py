@@ -32,7 +32,7 @@ def plot_solution(sol, path: str, flown=None) -> None:
     ax1.axis("equal")
     ax1.legend()
     t = np.concatenate([[0.0], np.cumsum(sol.stage_dt)]) * sol.units.get("tu_s", 1.0) / 86400
-    thrust = np.linalg.norm(sol.U_newton, axis=1)
+    thrust = np.linalg.norm(sol.thrust_n, axis=1)
     ax2.step(t[:-1], thrust, where="post", label="|u|")
     ax2.set_xlabel("time [day]")
     ax2.set_ylabel("thrust [N]")

@@ -21,9 +21,72 @@ from .da import functions as dm
 from .da.core import DA
 from .dynamics.units import Spacecraft, Units, unit_units
 from .errors import DaddyError
+from .dynamics.rhs import Dynamics, as_dynamics
 from .integrators import rk4, rk78
 
-StageFn = Callable  # (x, u, dt) -> array (n, B)
+
+class StageStep:
+    """The stage map f(x, u, dt) -> next state, batched (x (nx, B), u (nu, B), dt (B,)), on
+    floats or DA: what the solver relies on, with the two ways it evaluates a step.
+
+    Wraps a plain function (``Problem`` wraps any callable given as ``step``); ``FlowStep``
+    integrates a continuous right-hand side and serves both ways faster.
+    """
+
+    def __init__(self, fn: Callable):
+        self.fn = fn
+
+    def __call__(self, x, u, dt):
+        return self.fn(x, u, dt)
+
+    def flow(self, x: np.ndarray, u: np.ndarray, dt: float) -> np.ndarray:
+        """One float state (nx,) after a stage of duration dt under u (nu,)."""
+        return self(x[:, None], u[:, None], np.array([dt]))[:, 0]
+
+    def expand(self, x: DA, u: DA, dt: np.ndarray, values: np.ndarray) -> DA:
+        """The DA expansion at (x, u) whose constant part is ``values`` (nx, B): the flows the
+        caller has integrated already (a forward pass, Newton's residual)."""
+        F = self(x, u, dt)
+        F.c[0] = values
+        return F
+
+
+class FlowStep(StageStep):
+    """The flow of a ``Dynamics`` over a stage, integrated by RK78 or RK4 (see ``flow_step``)."""
+
+    def __init__(self, rhs: Dynamics, integrator: str, tol: float, rk4_steps: int,
+                 derivative_tol: float | None):
+        if integrator not in ("rk78", "rk4"):
+            raise DaddyError(f"integrator must be 'rk78' or 'rk4', got {integrator!r}")
+        super().__init__(None)
+        self.rhs, self.integrator, self.tol, self.rk4_steps = rhs, integrator, tol, rk4_steps
+        self.derivative_tol = tol if derivative_tol is None else max(tol, float(derivative_tol))
+
+    def __call__(self, x, u, dt):
+        if self.integrator == "rk4":
+            return rk4(self.rhs, x, u, 0.0, dt, steps=self.rk4_steps)
+        if isinstance(x, DA) and self.derivative_tol > self.tol:
+            return self._expand_rk78(x, u, dt, None)
+        # every integration first tries the whole stage (h0 = dt): most stages need one step
+        return rk78(self.rhs, x, u, 0.0, dt, tol=self.tol, h0=dt)
+
+    def flow(self, x, u, dt):
+        if self.integrator == "rk4":
+            return super().flow(x, u, dt)
+        return rk78(self.rhs, x, u, 0.0, dt, tol=self.tol, h0=dt)   # the single-state path
+
+    def expand(self, x, u, dt, values):
+        if self.integrator == "rk4":
+            return super().expand(x, u, dt, values)
+        return self._expand_rk78(x, u, dt, values)
+
+    def _expand_rk78(self, x: DA, u, dt, values):
+        """Derivatives from an RK78 run at ``derivative_tol``, the constant part -- the flow
+        itself -- at ``tol`` (or ``values`` as they are)."""
+        F = rk78(self.rhs, x, u, 0.0, dt, tol=self.derivative_tol, h0=dt)
+        F.c[0] = rk78(self.rhs, x.cons, dm.cons(u), 0.0, dt, tol=self.tol, h0=dt) \
+            if values is None else values
+        return F
 
 
 @dataclass(frozen=True)
@@ -34,7 +97,8 @@ class Problem:
         name: label used in reports.
         x0: (nx,) initial state; x_target: (nx,) target state.
         stage_dt: (N,) stage durations (normalised time).
-        step: f(x, u, dt) -> next state, the flow over one stage (float or DA, batched).
+        step: f(x, u, dt) -> next state, the flow over one stage (float or DA, batched): a
+            ``StageStep`` (``flow_step`` builds one from a right-hand side) or a plain function.
         stage_cost: l(x, u, dt, hom) -> (B,).
         terminal_cost: phi(x, x_target) -> scalar.
         g_ineq, g_eq: path constraints (x, u, dt) -> (n, B), or None.
@@ -51,8 +115,8 @@ class Problem:
     step: Callable
     stage_cost: Callable
     terminal_cost: Callable
-    g_ineq: Optional[StageFn] = None
-    g_eq: Optional[StageFn] = None
+    g_ineq: Optional[Callable] = None
+    g_eq: Optional[Callable] = None
     g_tineq: Optional[Callable] = None
     g_teq: Optional[Callable] = None
     nu: int = 3
@@ -60,7 +124,7 @@ class Problem:
     spacecraft: Optional[Spacecraft] = None
     u_max: Optional[float] = None
     mass_index: Optional[int] = None
-    rhs: Optional[Callable] = None  # continuous dynamics, for re-propagation checks
+    rhs: Optional[Dynamics] = None  # continuous dynamics, for re-propagation checks
 
     def __post_init__(self):
         x0 = np.asarray(self.x0, dtype=float)
@@ -81,6 +145,12 @@ class Problem:
         object.__setattr__(self, "x0", x0)
         object.__setattr__(self, "x_target", xt)
         object.__setattr__(self, "stage_dt", dt)
+        if not isinstance(self.step, StageStep):
+            if not callable(self.step):
+                raise DaddyError(f"problem.step must be callable, got {self.step!r}")
+            object.__setattr__(self, "step", StageStep(self.step))
+        if self.rhs is not None:
+            object.__setattr__(self, "rhs", as_dynamics(self.rhs))
 
     @property
     def nx(self) -> int:
@@ -132,9 +202,36 @@ class Problem:
 
     def stage_flow(self, x: np.ndarray, u: np.ndarray, k: int) -> np.ndarray:
         """State (nx,) after stage k from x (nx,) under u (nu,), in floats."""
-        if getattr(self.step, "unbatched_ok", False):   # rk78's faster single-trajectory path
-            return self.step(x, u, float(self.stage_dt[k]))
-        return self.step(x[:, None], u[:, None], self.stage_dt[k:k + 1])[:, 0]
+        return self.step.flow(x, u, float(self.stage_dt[k]))
+
+    # -- constraint violation (floats) -----------------------------------------------------
+    def constraint_values(self, X: np.ndarray, U: np.ndarray):
+        """Path constraints (n_c, N) and terminal constraints (n_t,) of a trajectory X
+        (N+1, nx), U (N, nu), with their inequality counts: (g, n_ineq, gt, n_tineq)."""
+        g, ni = self.path_constraints(X[:-1].T, U.T, self.stage_dt)
+        gt, nti = self.terminal_constraints(X[-1])
+        return g, ni, gt, nti
+
+    def violation(self, X: np.ndarray, U: np.ndarray) -> float:
+        """Max violation over every path and terminal constraint of (X, U)."""
+        g, ni, gt, nti = self.constraint_values(X, U)
+        return max(max_violation(g, ni), max_violation(gt, nti))
+
+    def terminal_violation(self, x: np.ndarray) -> float:
+        """Max violation of the terminal constraints at the final state x (nx,)."""
+        gt, nti = self.terminal_constraints(x)
+        return max_violation(gt, nti)
+
+
+def max_violation(g, n_ineq: int) -> float:
+    """Max constraint violation of stacked values g (inequalities first): max(g, 0) for the
+    n_ineq inequalities, |g| for the equalities; 0 without constraints."""
+    if g is None or np.size(g) == 0:
+        return 0.0
+    g = np.asarray(g, dtype=float)
+    v = np.abs(g)
+    v[:n_ineq] = np.maximum(g[:n_ineq], 0.0)
+    return float(v.max())
 
 
 # ---------------------------------------------------------------------------------- builders
@@ -143,39 +240,18 @@ DERIVATIVE_TOL = 1e-8
 
 
 def flow_step(rhs, integrator: str = "rk78", tol: float = 1e-13, rk4_steps: int = 20,
-              derivative_tol: float | None = DERIVATIVE_TOL):
-    """Stage map f(x, u, dt) from a continuous right-hand side and an integrator.
+              derivative_tol: float | None = DERIVATIVE_TOL) -> FlowStep:
+    """Stage map f(x, u, dt) from a continuous right-hand side (a ``Dynamics`` or a plain
+    rhs(t, x, u)) and an integrator.
 
     rk78 on a DA state (an expansion of the stage map): the constant part -- the flow itself --
     comes from a float integration at ``tol``; the derivatives from a DA integration whose
     steps start at the whole stage and keep the constant part's local error below
     ``derivative_tol`` (None: ``tol``). Newton and DDP need derivatives to ~1e-6 relative, not
-    1e-13: measured at the nominal plans' stages, derivative_tol 1e-8 takes 1 RK step instead of
-    4 per Earth-Mars stage (relative Jacobian error 1e-10) and 1 instead of 6 per halo stage
-    (Jacobian 6e-8, Hessian 2e-7; 1e-9 and 1e-10 still take 3 steps there), while every
-    value the solver compares stays integrated to ``tol``.
+    1e-13, and the looser tolerance takes far fewer RK steps per stage, while every value the
+    solver compares stays integrated to ``tol``.
     """
-    if integrator == "rk78":
-        dtol = tol if derivative_tol is None else max(tol, float(derivative_tol))
-
-        def step(x, u, dt, values=None):
-            """values: for a DA x, the flows (nx, B) at its constant part when the caller has
-            them already (integrated at ``tol``); they become the constant part as they are."""
-            # every integration first tries the whole stage (h0 = dt): measured on the nominal
-            # plans' stages at tol 1e-13, halo 1.6 steps per stage instead of 3.2 with rk78's
-            # default dt / 8, Earth-Mars 2.9 instead of 3.3
-            if isinstance(x, DA) and (dtol > tol or values is not None):
-                F = rk78(rhs, x, u, 0.0, dt, tol=dtol, h0=dt)
-                F.c[0] = rk78(rhs, x.cons, dm.cons(u), 0.0, dt, tol=tol, h0=dt) \
-                    if values is None else values
-                return F
-            return rk78(rhs, x, u, 0.0, dt, tol=tol, h0=dt)
-        step.unbatched_ok = True   # also takes x (nx,), u (nu,), scalar dt
-        step.takes_values = True   # takes values= (see step's docstring)
-        return step
-    if integrator == "rk4":
-        return lambda x, u, dt: rk4(rhs, x, u, 0.0, dt, steps=rk4_steps)
-    raise DaddyError(f"integrator must be 'rk78' or 'rk4', got {integrator!r}")
+    return FlowStep(as_dynamics(rhs), integrator, tol, rk4_steps, derivative_tol)
 
 
 def low_thrust_costs(n_pos: int, u_max: float, dt_avg: float, stage_gain: float,

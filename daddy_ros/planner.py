@@ -19,9 +19,9 @@ import numpy as np
 from daddy_core.errors import DaddyError
 from daddy_core.problem import problem_from_case
 from daddy_core.problems import load_case
-from daddy_core.solver import Solution, case_options, solve
+from daddy_core.solver import Solution, WarmStart, case_options, solve
 from daddy_core.da import functions as dm
-from daddy_core.solver.expansion import StageMaps, expand_dynamics, max_violation
+from daddy_core.solver.stage_maps import StageMaps, expand_dynamics
 
 # a first remaining stage shorter than this fraction of a nominal stage is merged into the next
 MIN_STAGE_FRACTION = 0.25
@@ -367,9 +367,9 @@ class GuidancePlanner:
             problem = self._rated(problem, rung)
         t0 = time.perf_counter()
         try:
-            sol = solve(problem, U_guess, method=self.method, fuel_optimal=None, polish=self.polish,
-                        options=opts, case_name=self.case.name, duals=duals,
-                        rho=current.solution.rho if warm else None, maps=maps)
+            start = WarmStart(U_guess, duals, current.solution.rho if warm else None, maps)
+            sol = solve(problem, start, method=self.method, fuel_optimal=None, polish=self.polish,
+                        options=opts, case_name=self.case.name)
             safe, feasible, why, X, miss = self._assess(sol, problem)
             if not safe and self.polish:
                 # polishing an infeasible problem can push the thrust past its bound: fall back
@@ -411,7 +411,7 @@ class GuidancePlanner:
                                      f"than flying it (miss {old_miss:.2e})", request_id, dt, None,
                                      sol.iterations, warm)
         plan = Plan(epoch_s=stamp_s, stage_dt_s=problem.stage_dt * self.units.tu_s,
-                    thrust_n=sol.U_newton.copy(), states_si=self.states_to_si(X),
+                    thrust_n=sol.thrust_n.copy(), states_si=self.states_to_si(X),
                     solution=sol, request_id=request_id, solve_time_s=dt, warm_start=warm,
                     max_violation=sol.max_violation,
                     thrust_bound_n=float(self.units.thrust_n(problem.u_max)))
@@ -485,8 +485,7 @@ class GuidancePlanner:
     @staticmethod
     def _miss(problem, X) -> float:
         """Max terminal-constraint violation at the end of the trajectory X."""
-        gt, nti = problem.terminal_constraints(X[-1])
-        return max_violation(gt, nti)
+        return problem.terminal_violation(X[-1])
 
     def _arrival(self, problem):
         """The arrival phase's terminal constraints (with ``arrival_tolerance_m`` > 0): the
@@ -541,7 +540,7 @@ class GuidancePlanner:
             except (DaddyError, ValueError, FloatingPointError):
                 sol.stage_maps = None   # re-optimisations then roll out and expand afresh
         bound = self.rated_problems[self._rung_for(sol.U)].u_max
-        plan = Plan(epoch_s, sol.stage_dt * self.units.tu_s, sol.U_newton.copy(),
+        plan = Plan(epoch_s, sol.stage_dt * self.units.tu_s, sol.thrust_n.copy(),
                     self.states_to_si(sol.X), sol, request_id, 0.0, False, sol.max_violation,
                     float(self.units.thrust_n(bound)))
         self.set_plan(plan)
@@ -572,7 +571,7 @@ class GuidancePlanner:
         if data.get("format") != PLAN_FORMAT or data.get("scenario") != self.case.name:
             raise DaddyError(f"persisted plan {path} is not a {PLAN_FORMAT} plan of scenario "
                              f"{self.case.name!r}")
-        thrust = sol.U_newton
+        thrust = sol.thrust_n
         if not (math.isfinite(epoch) and 1 <= len(thrust) <= self.base_problem.N
                 and np.all(np.isfinite(thrust)) and np.all(np.isfinite(sol.X))):
             raise DaddyError(f"persisted plan {path} has a bad epoch, stage count or values")

@@ -4,7 +4,7 @@ import numpy as np
 import pytest
 from scipy.integrate import solve_ivp
 
-from daddy_core.dynamics import models
+from daddy_core.dynamics import Dynamics, models
 from daddy_core.dynamics.units import earth_units
 from daddy_core.errors import DaddyError
 from daddy_core.integrators import dop853, rk4, rk78
@@ -62,7 +62,7 @@ def test_batched_rk78_with_different_stage_lengths(B):
 @pytest.mark.parametrize("name", ["earth_mars", "halo_l2_l1", "leo_leo"])
 def test_single_state_rk78_matches_batched_path(name):
     """One (nx,) state takes the plain-Python path: float lists for a rhs flagged
-    ``scalar_components``, numpy arrays for any other; both follow the batched path's steps."""
+    ``Dynamics.scalar_components``, numpy arrays for any other (a plain callable); both follow the batched path's steps."""
     case = load_case(name)
     rhs = case.rhs()
     assert rhs.scalar_components
@@ -167,7 +167,7 @@ def test_flow_step_takes_given_values_as_constant_part(derivative_tol):
     z = da.variables(np.concatenate([case.x0, [1e-3, 0.0, 0.0]])[:, None], order=2)
     dt = np.array([case.tof / 40])
     plain = step(z[:7], z[7:], dt)
-    given = step(z[:7], z[7:], dt, values=plain.cons + 1.0)
+    given = step.expand(z[:7], z[7:], dt, plain.cons + 1.0)
     np.testing.assert_array_equal(given.cons, plain.cons + 1.0)
     np.testing.assert_array_equal(given.gradient(), plain.gradient())
 
@@ -175,7 +175,7 @@ def test_flow_step_takes_given_values_as_constant_part(derivative_tol):
 @pytest.mark.parametrize("name", ["earth_mars", "halo_l2_l1", "leo_leo"])
 def test_prepared_control_changes_no_value(name):
     """The catalogue models let the integrators append |u| to the control once per integration
-    (``rhs.prepare_control``): flows and DA expansions are bit-identical to recomputing it at
+    (``Dynamics.prepare_control``): flows and DA expansions are bit-identical to recomputing it at
     every stage, and the rhs takes either form of the control."""
     from daddy_core import da
 
@@ -187,9 +187,9 @@ def test_prepared_control_changes_no_value(name):
     assert u4.shape == (4,) and u4[3] == models.thrust_magnitude(u)
     np.testing.assert_array_equal(rhs(0.0, case.x0, u4), rhs(0.0, case.x0, u))
 
-    def plain(t, x, uu):   # the same model without the attribute: |u| at every stage
-        return rhs(t, x, uu)
-    plain.scalar_components = True
+    def plain_fn(t, x, uu):   # the same model without the prepared control: |u| at every stage
+        return rhs.f(t, x, uu)
+    plain = Dynamics(plain_fn, scalar_components=True)
     T = case.tof / 40
     for x, uu in ((case.x0, u), (np.stack([case.x0] * 3, axis=1), np.stack([u] * 3, axis=1))):
         np.testing.assert_array_equal(rk78(rhs, x, uu, 0.0, T, h0=T),

@@ -52,7 +52,7 @@ def test_earth_mars_energy_dyn_matches_reference_oracle():
     assert sol.repropagation_miss < 1e-8
     ref = np.loadtxt(DATA / "earth_mars_energy__cylindrical.csv", delimiter=",", skiprows=1,
                      max_rows=40)   # (line 1: the column header comment)
-    thrust = np.linalg.norm(sol.U_newton, axis=1)
+    thrust = np.linalg.norm(sol.thrust_n, axis=1)
     # single optimum: the thrust profile agrees with the independent direct-transcription solve
     assert np.max(np.abs(thrust - ref[:, 12])) < 0.02
     assert np.all(thrust <= 0.5 * (1 + 1e-9))
@@ -126,7 +126,7 @@ def test_stage_maps_roll_out_and_restore_like_integration():
     # the Earth-Mars nominal plan's stage maps: a Dyn rollout (polynomials inside their radius)
     # follows the integrated one, and a Newton restoration from a perturbed start that
     # re-centres them ends as feasible as one that expands afresh
-    from daddy_core.solver.expansion import StageMaps, expand_dynamics
+    from daddy_core.solver.stage_maps import StageMaps, expand_dynamics
     from daddy_core.solver.newton import polish
     case = load_case("earth_mars")
     prob = problem_from_case(case)
@@ -145,7 +145,7 @@ def test_stage_maps_roll_out_and_restore_like_integration():
     assert served > prob.N // 2
     assert np.max(np.abs(X_dyn - X_int)) < 1e-4                # within eps_da per stage
     _, inside = maps.deviation(X_int, U)
-    _, inside10 = maps.deviation(X_int, U, reach=10.0)         # Newton's MAP_REACH
+    _, inside10 = maps.deviation(X_int, U, reach=10.0)         # SolverOptions.map_reach
     assert inside.sum() < inside10.sum() and np.all(inside10[inside])
     X_far, served_far = maps.rollout(prob, U, reach=10.0)      # a start for the restoration
     assert served_far > served and np.max(np.abs(X_far - X_int)) < 1e-8   # (measured 6e-13)

@@ -2,12 +2,13 @@
 from .models import (THRUST_FLOOR, cr3bp, double_integrator_step, equinoctial,
                      equinoctial_to_cartesian, keplerian_to_equinoctial, thrust_magnitude,
                      two_body)
+from .rhs import Dynamics, as_dynamics
 from .units import (SYSTEM_UNITS, Spacecraft, Units, earth_moon_units, earth_units, sun_units,
                     unit_units)
 
 __all__ = [
     "THRUST_FLOOR", "cr3bp", "double_integrator_step", "equinoctial", "equinoctial_to_cartesian",
     "keplerian_to_equinoctial", "thrust_magnitude", "two_body",
-    "SYSTEM_UNITS", "Spacecraft", "Units", "earth_moon_units", "earth_units", "sun_units",
+    "Dynamics", "as_dynamics", "SYSTEM_UNITS", "Spacecraft", "Units", "earth_moon_units", "earth_units", "sun_units",
     "unit_units",
 ]

@@ -1,7 +1,8 @@
 """Equations of motion from the paper, written once for floats, numpy arrays and DA.
 
 Every right-hand side has the signature ``rhs(t, x, u) -> dx/dt`` (a closure over its constants,
-built by the factory functions below), with ``x`` of shape (7, *batch) = [r (3), v (3), m] (or
+built by the factory functions below, returned as a ``Dynamics`` that says it reads x and u by
+index and prepares the thrust magnitude once per integration), with ``x`` of shape (7, *batch) = [r (3), v (3), m] (or
 equinoctial elements + mass) and ``u`` of shape (3, *batch) the thrust in normalised force units.
 Accelerations are thrust / mass; the mass rate is -|u| / c with c = g0 Isp in normalised units.
 
@@ -14,6 +15,7 @@ from __future__ import annotations
 import numpy as np
 
 from ..da import functions as dm
+from .rhs import Dynamics
 
 THRUST_FLOOR = 1e-12
 
@@ -26,7 +28,7 @@ def thrust_magnitude(u):
 def with_thrust_magnitude(u):
     """The control with its regularised magnitude appended, [u_0, u_1, u_2, |u|] (4, *batch).
 
-    The right-hand sides below declare it as ``rhs.prepare_control``: the integrators call it
+    The right-hand sides below declare it as ``Dynamics.prepare_control``: the integrators call it
     once per integration (the control is constant over a stage) and pass the result as u, so
     the magnitude -- a quarter of a DA right-hand side's products and its square root -- is not
     recomputed at each of RK78's 13 stages. The values are the same either way."""
@@ -38,6 +40,12 @@ def with_thrust_magnitude(u):
 def _magnitude(u):
     """|u| of a control, prepared by ``with_thrust_magnitude`` or not."""
     return u[3] if len(u) > 3 else thrust_magnitude(u)
+
+
+def _indexed(rhs) -> Dynamics:
+    """A right-hand side below: it reads x and u by index only, and takes the prepared
+    control of ``with_thrust_magnitude``."""
+    return Dynamics(rhs, scalar_components=True, prepare_control=with_thrust_magnitude)
 
 
 def double_integrator_step(x, u, dt):
@@ -59,9 +67,7 @@ def two_body(gm: float, exhaust_speed: float):
         inv_m = 1.0 / x[6]
         return dm.stack([x[3], x[4], x[5], u[0] * inv_m - x[0] * k, u[1] * inv_m - x[1] * k,
                          u[2] * inv_m - x[2] * k, _magnitude(u) * inv_c])
-    rhs.scalar_components = True   # reads x, u by index only: the RK78 may pass float lists
-    rhs.prepare_control = with_thrust_magnitude   # |u| once per integration
-    return rhs
+    return _indexed(rhs)
 
 
 def cr3bp(mu: float, exhaust_speed: float):
@@ -87,9 +93,7 @@ def cr3bp(mu: float, exhaust_speed: float):
         ay = x[3] * -2.0 + py - py * ksum + u[1] * inv_m
         az = u[2] * inv_m - pz * ksum
         return dm.stack([x[3], x[4], x[5], ax, ay, az, _magnitude(u) * inv_c])
-    rhs.scalar_components = True
-    rhs.prepare_control = with_thrust_magnitude
-    return rhs
+    return _indexed(rhs)
 
 
 def equinoctial(gm: float, exhaust_speed: float):
@@ -120,9 +124,7 @@ def equinoctial(gm: float, exhaust_speed: float):
         ds = B * sam * g * cL * inv_psi * fn * 0.5
         dL = psi * psi / (B * B * B * a * sam) - B * sam * inv_psi * rc * fn
         return dm.stack([da_, dp, dq, dr, ds, dL, _magnitude(u) * (-1.0 / exhaust_speed)])
-    rhs.scalar_components = True
-    rhs.prepare_control = with_thrust_magnitude
-    return rhs
+    return _indexed(rhs)
 
 
 def keplerian_to_equinoctial(a, e, i_rad, raan_rad, argp_rad, nu_rad):

@@ -22,6 +22,11 @@ AU_KM = 149_597_870.7
 MU_EARTH_KM3_S2 = 398_600.0
 MU_MOON_KM3_S2 = 4_902.80
 EARTH_MOON_KM = 384_399.0
+# mean body radii (the guidance node's domain checks)
+EARTH_RADIUS_KM = 6378.1
+MOON_RADIUS_KM = 1737.4
+# systems whose states are Cartesian [r (3), v (3), (m)]; the equinoctial one is [a, p, q, r, s, L, m]
+CARTESIAN_SYSTEMS = ("sun_two_body", "earth_moon_cr3bp", "double_integrator")
 
 
 @dataclass(frozen=True)
@@ -83,6 +88,43 @@ class Units:
 
     def thrust_n(self, tu):
         return np.asarray(tu, dtype=float) * self.thrust_unit_n
+
+    # whole states
+    def states_si(self, X) -> np.ndarray:
+        """Normalised states (..., nx) -> SI: Cartesian [position m, velocity m/s, mass kg];
+        equinoctial [a m, p, q, r, s, L rad, mass kg] (the elements p..L are dimensionless)."""
+        X = np.array(X, dtype=float)
+        if self.name in CARTESIAN_SYSTEMS:
+            X[..., :3] = self.length_m(X[..., :3])
+            X[..., 3:6] = self.speed_m_s(X[..., 3:6])
+        else:
+            X[..., 0] = self.length_m(X[..., 0])
+        if X.shape[-1] == 7:
+            X[..., 6] = self.mass_kg(X[..., 6])
+        return X
+
+    def states_normalised(self, X_si) -> np.ndarray:
+        """The inverse of ``states_si``."""
+        X = np.array(X_si, dtype=float)
+        if self.name in CARTESIAN_SYSTEMS:
+            X[..., :3] = self.length(X[..., :3])
+            X[..., 3:6] = self.speed(X[..., 3:6])
+        else:
+            X[..., 0] = self.length(X[..., 0])
+        if X.shape[-1] == 7:
+            X[..., 6] = self.mass(X[..., 6])
+        return X
+
+    def as_dict(self) -> dict:
+        """The units as a ``Solution`` records them."""
+        return {"system": self.name, "lu_km": self.lu_km, "tu_s": self.tu_s, "mu_kg": self.mu_kg,
+                "thrust_unit_n": self.thrust_unit_n}
+
+    @classmethod
+    def from_dict(cls, d: dict) -> "Units":
+        """Units from ``as_dict``'s record (gm is not recorded: conversions do not need it)."""
+        return cls(d.get("system", "double_integrator"), float(d.get("lu_km", 1e-3)),
+                   float(d.get("tu_s", 1.0)), float(d.get("mu_kg", 1.0)))
 
 
 def sun_units(mass_kg: float = 1000.0) -> Units:

@@ -1,4 +1,5 @@
-"""Augmented Lagrangian outer loop (paper Alg. 4, eq. 8-9), ALTRO-style."""
+"""Augmented Lagrangian outer loop (paper Alg. 4) and its multiplier/penalty update (eq. 9),
+ALTRO-style: DDP on the augmented cost of ``lagrangian`` until the constraints are met."""
 from __future__ import annotations
 
 import time
@@ -6,23 +7,23 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .ddp import DDPStats, ddp
-from .expansion import Multipliers, Stages, constraint_values, max_violation
+from ..problem import max_violation
+from .ddp import DDPStats, Gains, Stages, ddp
+from .lagrangian import Multipliers
+from .options import Method, SolverOptions
+from .results import Status, StepResult
 
 
 @dataclass
-class AULResult:
+class AULResult(StepResult):
     stages: Stages
     mult: Multipliers
     max_violation: float
-    converged: bool
-    iterations: int
-    reason: str
-    rho: float = 0.0
-    gains: object = None  # Gains of the last backward sweep (None if no DDP iteration ran)
+    rho: float
+    gains: Gains | None   # of the last backward sweep (None if no DDP iteration ran)
 
 
-def update_multipliers(mult: Multipliers, g, gt, opts) -> Multipliers:
+def update_multipliers(mult: Multipliers, g, gt, opts: SolverOptions) -> Multipliers:
     """Eq. 9: lam <- max(0, lam + mu g) for inequalities, lam + mu g for equalities; mu <- gamma mu."""
     lam, lam_t = mult.lam.copy(), mult.lam_t.copy()
     if g is not None:
@@ -38,33 +39,32 @@ def update_multipliers(mult: Multipliers, g, gt, opts) -> Multipliers:
                        mult.n_ineq, mult.n_tineq)
 
 
-def aul(problem, X, U, mult: Multipliers, hom, sweep: str, dyn: bool, opts, stats: DDPStats,
-        deadline: float | None = None, progress=None, rho0: float | None = None,
-        F=None) -> AULResult:
-    """Alg. 4: DDP on the augmented cost, multiplier and penalty updates, until the maximum
-    constraint violation is below tol_aul. rho0: Quu regularisation to start from (None:
-    opts.rho_init); with opts.carry_rho each DDP solve resumes from the previous one's.
-    F: stage maps at (X, U) if already known (else expanded here)."""
-    st = Stages(problem, X, U, mult, hom, opts.eps_da, F=F)
+def aul(st: Stages, method: Method, opts: SolverOptions, stats: DDPStats,
+        deadline: float | None = None, progress=None, rho0: float | None = None) -> AULResult:
+    """Alg. 4 from the expanded nominal ``st`` (its multipliers and homotopy point): DDP on the
+    augmented cost, multiplier and penalty updates, until the maximum constraint violation is
+    below tol_aul. rho0: Quu regularisation to start from (None: opts.rho_init); with
+    opts.carry_rho each DDP solve resumes from the previous one's."""
+    problem, mult, hom = st.problem, st.mult, st.hom
     gains = None
-    reason = "aul_max_iter reached"
     gmax = np.inf
     rho, rho_last = rho0, opts.rho_init if rho0 is None else rho0
     for it in range(1, opts.aul_max_iter + 1):
-        res = ddp(st, sweep, dyn, opts, stats, deadline, rho0=rho)
+        res = ddp(st, method, opts, stats, deadline, rho0=rho)
         rho_last = res.rho
         gains = res.gains or gains
         rho = res.rho if opts.carry_rho else rho0
         st = res.stages
-        g, ni, gt, nti = constraint_values(problem, st.X, st.U)
+        g, ni, gt, nti = problem.constraint_values(st.X, st.U)
         gmax = max(max_violation(g, ni), max_violation(gt, nti))
         if progress is not None:
             progress(f"  AUL {it:2d}: DDP {res.iterations:3d} it ({res.reason}), "
                      f"cost {st.cost:.6e}, max violation {gmax:.2e}")
         if deadline is not None and time.perf_counter() > deadline:
-            return AULResult(st, mult, gmax, False, it, "time budget exceeded", rho_last, gains)
+            return AULResult(False, it, Status.TIME_BUDGET, st, mult, gmax, rho_last, gains)
         if gmax <= opts.tol_aul:
-            return AULResult(st, mult, gmax, True, it, "max violation below tol_aul", rho_last, gains)
+            return AULResult(True, it, Status.AUL_CONVERGED, st, mult, gmax, rho_last, gains)
         mult = update_multipliers(mult, g, gt, opts)
         st = Stages(problem, st.X, st.U, mult, hom, opts.eps_da, F=st.F)
-    return AULResult(st, mult, gmax, False, opts.aul_max_iter, reason, rho_last, gains)
+    return AULResult(False, opts.aul_max_iter, Status.AUL_MAX_ITER, st, mult, gmax, rho_last,
+                     gains)

@@ -11,13 +11,18 @@ from __future__ import annotations
 
 import math
 import time
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 
 import numpy as np
 
 from .. import da
 from ..errors import DaddyError
-from .expansion import Stages, augmented_cost, expand_dynamics, maps_at, total_violation
+from ..problem import Problem
+from .lagrangian import (Multipliers, augmented_cost, augmented_stage_cost,
+                         augmented_terminal_cost)
+from .options import Method, SolverOptions, Sweep
+from .results import Status, StepResult
+from .stage_maps import expand_dynamics, maps_at
 
 
 @dataclass
@@ -30,7 +35,6 @@ class DDPStats:
     backward_s: float = 0.0
     stages_total: int = 0
     stages_polynomial: int = 0
-    history: list = field(default_factory=list)
 
     @property
     def polynomial_share(self) -> float:
@@ -49,6 +53,49 @@ class Gains:
     b: np.ndarray
     dv1: float
     dv2: float
+
+
+# --------------------------------------------------------------------------- quadratic model
+class Stages:
+    """The expansions of one nominal trajectory (X, U) for the current multipliers.
+
+    Attributes:
+        X: (N+1, nx), U: (N, nu) nominal.
+        F: DA (nx, N): second-order stage maps in z = [dx, du].
+        radius: (N,) convergence radii of F at accuracy eps_da.
+        lz: (N, n), lzz: (N, n, n): derivatives of the augmented stage cost.
+        phix: (nx,), phixx: (nx, nx): derivatives of the augmented terminal cost.
+        cost: augmented cost J of the nominal.
+    """
+
+    def __init__(self, problem: Problem, X, U, mult: Multipliers, hom, eps_da: float, F=None):
+        self.problem = problem
+        self.X = np.asarray(X, dtype=float)
+        self.U = np.asarray(U, dtype=float)
+        self.mult = mult
+        self.hom = hom
+        self.eps_da = eps_da
+        self.F = F if F is not None else expand_dynamics(problem, self.X[:-1], self.U,
+                                                                 problem.stage_dt)
+        self.radius = da.radius(self.F, eps_da)
+        self._expand_costs()
+
+    @property
+    def n(self) -> int:
+        return self.problem.nx + self.problem.nu
+
+    def _expand_costs(self):
+        p = self.problem
+        z = da.variables(np.concatenate([self.X[:-1].T, self.U.T]), order=2)
+        lt = augmented_stage_cost(p, z[:p.nx], z[p.nx:], self.mult, self.hom)
+        if not isinstance(lt, da.DA):  # a cost without any dependence on (x, u)
+            lt = da.constant(lt, self.n) + z[0] * 0.0
+        self.lz = lt.gradient()
+        self.lzz = lt.hessian()
+        phi = augmented_terminal_cost(p, da.variables(self.X[-1], order=2), self.mult)
+        self.phix = phi.gradient()
+        self.phixx = phi.hessian()
+        self.cost = float(np.sum(lt.cons) + phi.cons)
 
 
 # ---------------------------------------------------------------------------- backward sweeps
@@ -152,7 +199,7 @@ def _bordered(grad: np.ndarray, hess: np.ndarray) -> np.ndarray:
     return B
 
 
-def backward_sweep(st: Stages, sweep: str, rho: float) -> Gains | None:
+def backward_sweep(st: Stages, sweep: Sweep, rho: float) -> Gains | None:
     """One backward sweep; returns None when Q_uu + rho I is not positive definite.
 
     Cost-to-go and Q are carried as bordered matrices (``_bordered``): V_k = [[V_xx, V_x],
@@ -165,7 +212,7 @@ def backward_sweep(st: Stages, sweep: str, rho: float) -> Gains | None:
     nx, nu, N = p.nx, p.nu, p.N
     n = nx + nu
     fz = np.moveaxis(st.F.gradient(), 1, 0)  # (N, nx, n)
-    fzz = np.moveaxis(st.F.hessian(), 1, 0) if sweep == "hess" else None
+    fzz = np.moveaxis(st.F.hessian(), 1, 0) if sweep is Sweep.HESS else None
     L = _bordered(st.lz, st.lzz)                           # (N, n+1, n+1)
     Jb = np.zeros((N, nx + 1, n + 1))
     Jb[:, :nx, :n] = fz
@@ -179,7 +226,7 @@ def backward_sweep(st: Stages, sweep: str, rho: float) -> Gains | None:
     for k in range(N - 1, -1, -1):
         Qb_gn = L[k] + Jb[k].T @ Vb @ Jb[k]                # eq. 3 without dynamics Hessians
         Qb = Qb_gn
-        if sweep == "q":
+        if sweep is Sweep.Q:
             # Alg. 10: P_Q = P_l + P_V(P_f - x_{k+1}); derivatives read from its coefficients
             pq = da.compose(_quadratic_da(Vb[:nx, nx], Vb[:nx, :nx]), st.F[:, k] - st.X[k + 1])
             Qb = L[k] + _bordered(pq.gradient(), pq.hessian())
@@ -196,7 +243,7 @@ def backward_sweep(st: Stages, sweep: str, rho: float) -> Gains | None:
             return None
         Qu_rows[k] = Qb[nx:n]
         Kk = np.matmul(Minv, Qb[nx:n], out=K[k])   # eq. 4-5: a_k = -Kk[:, n], b_k = -Kk[:, :nx]
-        if sweep == "q":
+        if sweep is Sweep.Q:
             # Alg. 10: P_V,k = P_Q,k(dx, a_k + b_k dx)
             pv = da.compose(_quadratic_da(Qb[:n, n], Qb[:n, :n]),
                             _feedback_map(-Kk[:, n], -Kk[:, :nx]))
@@ -254,7 +301,7 @@ def forward_pass(st: Stages, gains: Gains, alpha: float, dyn: bool):
     return X, U, poly, dz, True
 
 
-def new_maps(st: Stages, X, U, poly, dz, dyn: bool):
+def new_maps(st: Stages, X, U, poly, dz, dyn: bool) -> da.DA:
     """Stage maps at the new nominal: one batched expansion of the integrated stages and one
     batched re-centring (composition) of the stages served by their polynomial. The forward
     pass integrated X[k+1] from (X[k], U[k]) wherever stage k is re-expanded: those flows are
@@ -265,36 +312,55 @@ def new_maps(st: Stages, X, U, poly, dz, dyn: bool):
 
 
 # ----------------------------------------------------------------------------------- the loop
-# ddp_stop_on_prediction stops when the predicted decrease is below this fraction of tol_ddp:
-# at tol_ddp itself the closed-loop halo re-plans (predicted ~6e-5 relative each) skipped every
-# step and the Monte Carlo flew 35 g more propellant (median 26.81 kg instead of 26.78); the
-# Earth-Mars bench re-plans predict ~1e-6. (The guidance planner does not use the stop: see
-# GuidancePlanner.__init__.)
-PREDICTED_STOP_FRACTION = 0.1
-
-
 @dataclass
-class DDPResult:
+class DDPResult(StepResult):
     stages: Stages
-    converged: bool
-    iterations: int
-    reason: str
-    rho: float = 0.0
-    gains: Gains | None = None  # of the last backward sweep
+    rho: float
+    gains: Gains | None  # of the last backward sweep
 
 
-def _raise_rho(rho: float, opts, growth: float | None = None) -> float:
+def _raise_rho(rho: float, opts: SolverOptions, growth: float | None = None) -> float:
     """rho times ``growth`` (default opts.rho_factor), at least opts.rho_min."""
     return max(rho * (opts.rho_factor if growth is None else growth), opts.rho_min)
 
 
-def _lower_rho(rho: float, opts) -> float:
+def _lower_rho(rho: float, opts: SolverOptions) -> float:
     r = rho / opts.rho_factor
     return r if r >= opts.rho_min else 0.0
 
 
-def ddp(st: Stages, sweep: str, dyn: bool, opts, stats: DDPStats, deadline: float | None = None,
-        alpha0: float = 1.0, rho0: float | None = None) -> DDPResult:
+def _sweep(st: Stages, sweep: Sweep, rho: float, stats: DDPStats) -> Gains | None:
+    """A backward sweep; far from the optimum the dynamics-Hessian terms can make Q_uu
+    indefinite through V_xx, and the Gauss-Newton (Std) sweep at the same rho is taken instead."""
+    t0 = time.perf_counter()
+    gains = backward_sweep(st, sweep, rho)
+    if gains is None and sweep is not Sweep.STD:
+        gains = backward_sweep(st, Sweep.STD, rho)
+    stats.backward_s += time.perf_counter() - t0
+    return gains
+
+
+def _line_search(st: Stages, gains: Gains, a0: float, dyn: bool, opts: SolverOptions, J: float):
+    """Backtracking from step a0 (one step length at a time): the first step whose actual /
+    expected decrease lies in (ls_min_ratio, ls_max_ratio), or that decreases the cost where
+    the expected decrease is round-off. Returns (alpha, X, U, poly, dz, Jn) or None."""
+    p = st.problem
+    for a in a0 * opts.ls_shrink ** np.arange(opts.ls_max_halvings + 1):
+        X, U, poly, dz, ok = forward_pass(st, gains, a, dyn)
+        if not ok:
+            continue
+        Jn = augmented_cost(p, X, U, st.mult, st.hom)
+        expected = -(a * gains.dv1 + a * a * gains.dv2)
+        actual = J - Jn
+        if np.isfinite(Jn) and (
+                (expected > 0 and opts.ls_min_ratio < actual / expected < opts.ls_max_ratio)
+                or (expected <= 1e-15 * max(1.0, abs(J)) and actual >= 0)):
+            return a, X, U, poly, dz, Jn
+    return None
+
+
+def ddp(st: Stages, method: Method, opts: SolverOptions, stats: DDPStats,
+        deadline: float | None = None, rho0: float | None = None) -> DDPResult:
     """Alg. 3: iterate backward sweep + forward pass until the relative cost decrease is small.
 
     The line search accepts a step when actual / expected decrease lies in
@@ -305,69 +371,49 @@ def ddp(st: Stages, sweep: str, dyn: bool, opts, stats: DDPStats, deadline: floa
     """
     p = st.problem
     rho = opts.rho_init if rho0 is None else rho0
-    alpha = alpha0
+    alpha = 1.0
     J = st.cost
     last = None
+
+    def result(converged, iterations, status):
+        return DDPResult(converged, iterations, status, st, rho, last)
+
     for it in range(1, opts.ddp_max_iter + 1):
         if deadline is not None and time.perf_counter() > deadline:
-            return DDPResult(st, False, it - 1, "time budget exceeded", rho, last)
-        t0 = time.perf_counter()
-        gains = backward_sweep(st, sweep, rho)
-        if gains is None and sweep != "std":
-            # far from the optimum the dynamics-Hessian terms can make Q_uu indefinite through
-            # V_xx (Earth-Mars cold start: ~70 failed Hess sweeps until rho ~ 1e6, then the
-            # outcome hung on round-off): take the Gauss-Newton sweep at this rho instead
-            gains = backward_sweep(st, "std", rho)
-        stats.backward_s += time.perf_counter() - t0
+            return result(False, it - 1, Status.TIME_BUDGET)
+        gains = _sweep(st, method.sweep, rho, stats)
         if gains is None:
             rho = _raise_rho(rho, opts)
             if rho > opts.rho_max:
-                return DDPResult(st, False, it, "Q_uu not positive definite up to rho_max", rho, last)
+                return result(False, it, Status.QUU_INDEFINITE)
             continue
         last = gains
         # SolverOptions.ddp_stop_on_prediction: converged before any step when the full step's
-        # predicted decrease is below PREDICTED_STOP_FRACTION * tol_ddp (the post-step test
-        # below would call that step's outcome converged anyway) and the constraints are met
-        # to tol_aul (else the small steps are how the augmented Lagrangian makes progress)
+        # predicted decrease is small and the constraints are met to tol_aul (else the small
+        # steps are how the augmented Lagrangian makes progress)
         full_step_gain = -(gains.dv1 + gains.dv2) / max(abs(J), 1e-300)
         if opts.ddp_stop_on_prediction and it >= opts.ddp_min_iter and \
-                0.0 <= full_step_gain < PREDICTED_STOP_FRACTION * opts.tol_ddp and \
-                total_violation(p, st.X, st.U) <= opts.tol_aul:
-            return DDPResult(st, True, it - 1, "predicted cost decrease below tol_ddp / 10", rho,
-                             last)
-        accepted = False
-        a0 = alpha if dyn else 1.0
+                0.0 <= full_step_gain < opts.ddp_predicted_stop_fraction * opts.tol_ddp and \
+                p.violation(st.X, st.U) <= opts.tol_aul:
+            return result(True, it - 1, Status.DDP_PREDICTED)
         t0 = time.perf_counter()
-        # one step length at a time: propagating two candidates together cost more than the
-        # second one saved (Earth-Mars fuel 35 -> 25 s; most steps pass at the first try)
-        for a in a0 * opts.ls_shrink ** np.arange(opts.ls_max_halvings + 1):
-            X, U, poly, dz, ok = forward_pass(st, gains, a, dyn)
-            if not ok:
-                continue
-            Jn = augmented_cost(p, X, U, st.mult, st.hom)
-            expected = -(a * gains.dv1 + a * a * gains.dv2)
-            actual = J - Jn
-            if np.isfinite(Jn) and (
-                    (expected > 0 and opts.ls_min_ratio < actual / expected < opts.ls_max_ratio)
-                    or (expected <= 1e-15 * max(1.0, abs(J)) and actual >= 0)):
-                accepted = True
-                break
+        step = _line_search(st, gains, alpha if method.dyn else 1.0, method.dyn, opts, J)
         stats.forward_s += time.perf_counter() - t0
-        if not accepted:
+        if step is None:
             rho = _raise_rho(rho, opts, opts.short_step_rho_growth)
             if rho > opts.rho_max:
-                return DDPResult(st, False, it, "line search failed up to rho_max", rho, last)
+                return result(False, it, Status.LINE_SEARCH_FAILED)
             continue
+        a, X, U, poly, dz, Jn = step
         stats.iterations += 1
         stats.stages_total += p.N
         stats.stages_polynomial += int(poly.sum())
         t0 = time.perf_counter()
-        F = new_maps(st, X, U, poly, dz, dyn)
+        F = new_maps(st, X, U, poly, dz, method.dyn)
         st = Stages(p, X, U, st.mult, st.hom, st.eps_da, F=F)
         stats.expansion_s += time.perf_counter() - t0
         rel = (J - Jn) / max(abs(J), 1e-300)
         J = st.cost
-        stats.history.append({"cost": J, "alpha": a, "rho": rho, "poly": int(poly.sum())})
         if a < opts.short_step:
             # the quadratic model promised far more than the step delivered (e.g. controls in the
             # linear part of the pseudo-Huber cost, whose tiny curvature asks for huge steps):
@@ -375,11 +421,11 @@ def ddp(st: Stages, sweep: str, dyn: bool, opts, stats: DDPStats, deadline: floa
             rho = _raise_rho(rho, opts, opts.short_step_rho_growth)
         else:
             rho = _lower_rho(rho, opts)
-        if dyn:
+        if method.dyn:
             alpha = min(1.0, 2.0 * a)
         # converged when the decrease is small for a (nearly) full step: a small decrease after a
         # heavily shortened step only says the line search struggled
         if (it >= opts.ddp_min_iter and 0.0 <= rel < opts.tol_ddp
                 and (a >= 0.5 or full_step_gain < opts.tol_ddp)):
-            return DDPResult(st, True, it, "relative cost decrease below tol_ddp", rho, last)
-    return DDPResult(st, False, opts.ddp_max_iter, "ddp_max_iter reached", rho, last)
+            return result(True, it, Status.DDP_CONVERGED)
+    return result(False, opts.ddp_max_iter, Status.DDP_MAX_ITER)

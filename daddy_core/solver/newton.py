@@ -9,9 +9,8 @@ u_max): the minimum of dY^T W^{-1} dY instead, dY = -W Delta^T (Delta W Delta^T)
 W = 1 on the states and w_k = max(|u_k| / u_max, floor)^2 on the controls of stage k. The plain
 step moves a coasting stage's control (|u| ~ 1e-3 u_max in a fuel-optimal plan) as much as a
 thrusting one's; there the mass flow -|u| / c is far from its quadratic model, so the exact
-residual after an outer iteration was the model's mass error and Newton converged linearly
-(Earth-Mars re-plan: 3e-4, 1.8e-6, 1.7e-8, 2.2e-10, 2.9e-12). Weighted, the correction goes to the
-thrust arcs, coasting arcs keep coasting, and one outer iteration reaches 1.3e-11.
+residual after an outer iteration is the model's mass error and Newton converges linearly.
+Weighted, the correction goes to the thrust arcs and coasting arcs keep coasting.
 
 Alg. 11: the constraints are expanded to order 2 at Y once per outer iteration (one batched DA
 call for all stages); inner iterations re-use the factorisation of Sigma = Delta Delta^T and
@@ -19,6 +18,9 @@ evaluate the polynomial model P_Gamma instead of integrating, while the model co
 r = log d*_max / log d_max above eps_CV. Sigma is symmetric block-tridiagonal (rows ordered by
 stage); it is factorised as a banded matrix (LAPACK pbtrf through scipy's cholesky_banded), whose
 cost grows linearly with N -- no dense N_c^3 factorisation.
+
+Two entry points: ``restore`` drives a warm start's guess to feasibility before DDP (from the
+previous plan's stage maps), ``polish`` finishes a DDP solution (Alg. 11); both run ``newton``.
 """
 from __future__ import annotations
 
@@ -31,27 +33,19 @@ from scipy.linalg import LinAlgError, cho_solve_banded, cholesky_banded
 
 from .. import da
 from ..errors import DaddyError
-from .expansion import StageMaps, expand_dynamics, total_violation
-
-
-# Newton re-centres stage maps up to this many times their convergence radius (eps_da): its
-# residuals are exact, so derivatives a little less accurate only slow its convergence, and an
-# outer iteration that does not reduce the residual expands afresh. Earth-Mars re-plans: the
-# restoration re-centres the previous plan's maps instead of expanding ~30 stages (40 -> 28 ms),
-# same iterations and final states at 10x and 100x.
-MAP_REACH = 10.0
+from ..problem import Problem
+from .options import SolverOptions
+from .results import Status, StepResult
+from .stage_maps import StageMaps, expand_dynamics
 
 
 @dataclass
-class PolishResult:
+class NewtonResult(StepResult):
     X: np.ndarray
     U: np.ndarray
     max_violation: float
-    converged: bool
-    improved: bool
-    iterations: int
-    reason: str
-    maps: StageMaps | None = None  # the last model's stage maps
+    improved: bool                # X, U are an evaluated iterate (not the input given back)
+    maps: StageMaps | None        # the last model's stage maps
 
 
 def _active(g0: np.ndarray, n_ineq: int, active_tol: float) -> np.ndarray:
@@ -65,7 +59,7 @@ def _active(g0: np.ndarray, n_ineq: int, active_tol: float) -> np.ndarray:
 class _Model:
     """Order-2 expansion of the active constraints at one Y."""
 
-    def __init__(self, problem, X, U, active_tol, F=None):
+    def __init__(self, problem: Problem, X, U, active_tol: float, F=None):
         p = self.p = problem
         self.X, self.U = X, U
         nx, N = p.nx, p.N
@@ -160,7 +154,7 @@ class _Model:
         return X, self.U + b[:, :p.nu]
 
 
-def _column_weights(problem, U: np.ndarray, floor: float) -> np.ndarray | None:
+def _column_weights(problem: Problem, U: np.ndarray, floor: float) -> np.ndarray | None:
     """sqrt(W) of the weighted step over Y's columns (N * (nu + nx),): 1 on the states,
     max(|u_k| / u_max, floor) on the controls of stage k; None for plain steps (floor 0 or no
     thrust bound)."""
@@ -197,7 +191,7 @@ class _BandedSigma:
         return dY if self.scale is None else dY * self.scale
 
 
-def _float_residual(problem, X, U, active_tol: float):
+def _float_residual(problem: Problem, X, U, active_tol: float):
     """Gamma(Y) in floats: the stage flows f(x_k, u_k) (nx, N) from one batched float
     integration, and max |Gamma(Y)| over the same active set as ``_Model.residual()``."""
     fx = problem.step(X[:-1].T, U.T, problem.stage_dt)                     # (nx, N)
@@ -213,23 +207,39 @@ def _float_residual(problem, X, U, active_tol: float):
     return fx, float(np.max(np.concatenate(vals)))
 
 
-def exact_valued_maps(problem, maps: StageMaps | None, X, U, fx):
+def exact_valued_maps(problem: Problem, maps: StageMaps | None, X, U, fx,
+                      reach: float) -> da.DA:
     """Order-2 stage maps at (X[:-1], U) whose values are the exact float flows ``fx``.
 
     ``maps``: maps of a nearby trajectory (the previous outer iteration's, or given to
-    ``polish``): re-centred where the stage lies within MAP_REACH times their radius,
+    ``newton``): re-centred where the stage lies within ``reach`` times their radius,
     re-expanded elsewhere; None: expand every stage. The constant part is then replaced by
     ``fx``, so the model's residual at Y is exact and only its derivatives carry the
     re-centring's truncation error.
     """
     F = expand_dynamics(problem, X[:-1], U, problem.stage_dt, values=fx) if maps is None \
-        else maps.at(problem, X, U, values=fx, reach=MAP_REACH)   # a new DA either way
+        else maps.at(problem, X, U, values=fx, reach=reach)   # a new DA either way
     F.c[0] = fx
     return F
 
 
-def polish(problem, X, U, opts, deadline: float | None = None,
-           maps: StageMaps | None = None) -> PolishResult:
+def restore(problem: Problem, X, U, opts: SolverOptions, deadline: float | None = None,
+            maps: StageMaps | None = None) -> NewtonResult:
+    """A feasible start for DDP from a warm start's (X, U): Newton to opts.tol_newton, its
+    derivatives from ``maps`` (the previous plan's) re-centred where they reach; a solve stopped
+    later by its time budget still returns a trajectory that meets every constraint."""
+    return newton(problem, X, U, opts, deadline, maps)
+
+
+def polish(problem: Problem, X, U, opts: SolverOptions, deadline: float | None = None,
+           maps: StageMaps | None = None) -> NewtonResult:
+    """Alg. 11 on a DDP solution: its constraints to opts.tol_newton (``maps``: the DDP's last
+    stage maps, or None to expand every stage afresh)."""
+    return newton(problem, X, U, opts, deadline, maps)
+
+
+def newton(problem: Problem, X, U, opts: SolverOptions, deadline: float | None = None,
+           maps: StageMaps | None = None) -> NewtonResult:
     """Alg. 11 from (X, U) to max active-constraint violation <= opts.tol_newton.
 
     The constraint values Gamma(Y) are always exact (one batched float integration of every
@@ -241,77 +251,90 @@ def polish(problem, X, U, opts, deadline: float | None = None,
     makes the next one expand every stage afresh.
     """
     X0, U0 = X.copy(), U.copy()
-    gamma = 0.5
     it = 0
     best = None
-    reason = "newton_max_iter reached"
+    status = Status.NEWTON_MAX_ITER
     prev_dmax, fresh = np.inf, True
     while it < opts.newton_max_iter:
         if deadline is not None and time.perf_counter() > deadline:
-            reason = "time budget exceeded"
+            status = Status.TIME_BUDGET
             break
         try:
             fx, dmax = _float_residual(problem, X, U, opts.newton_active_tol)
         except (DaddyError, FloatingPointError, OverflowError):
             dmax = np.inf
         if not np.isfinite(dmax):
-            reason = "constraint evaluation produced NaN"
+            status = Status.NEWTON_NAN
             break
         if best is None or dmax < best[0]:
             best = (dmax, X.copy(), U.copy())
         if dmax <= opts.tol_newton:
-            reason = "active constraints below tol_newton"
+            status = Status.NEWTON_CONVERGED
             break
         if dmax >= prev_dmax and not fresh:
             maps = None   # the re-centred derivatives did not help: expand afresh
         prev_dmax = dmax
         fresh = maps is None
         model = _Model(problem, X, U, opts.newton_active_tol,
-                       F=exact_valued_maps(problem, maps, X, U, fx))
-        d = model.residual()
-        scale = _column_weights(problem, U, opts.newton_control_weight_floor)
-        try:
-            sigma = _BandedSigma(model.D, opts.newton_regularisation, scale)
-        except (LinAlgError, ValueError):
-            try:
-                sigma = _BandedSigma(model.D, max(1e-8, 1e3 * opts.newton_regularisation), scale)
-            except (LinAlgError, ValueError):
-                reason = "Delta Delta^T is singular"
-                break
-        dY = np.zeros(model.D.shape[1])
-        r = np.inf
-        inner = 0
-        # inner iterations on the polynomial model, re-using the factorisation (Alg. 11)
-        while dmax > opts.tol_newton and r > opts.newton_cv_ratio and inner < 20:
-            step = sigma.step(d)
-            alpha, dstar = 1.0, None
-            for _ in range(25):
-                cand = model.residual(dY + alpha * step)
-                cmax = float(np.max(np.abs(cand)))
-                if np.isfinite(cmax) and cmax < dmax:
-                    dstar = cand
-                    break
-                alpha *= gamma
-            if dstar is None:
-                break
-            dY = dY + alpha * step
-            d = dstar
-            new_max = float(np.max(np.abs(d)))
-            r = np.log(new_max) / np.log(dmax) if 0 < dmax < 1 and new_max > 0 else np.inf
-            dmax = new_max
-            inner += 1
+                       F=exact_valued_maps(problem, maps, X, U, fx, opts.map_reach))
+        sigma = _factorise(model, _column_weights(problem, U, opts.newton_control_weight_floor),
+                           opts.newton_regularisation)
+        if sigma is None:
+            status = Status.NEWTON_SINGULAR
+            break
+        dY, inner = _inner_iterations(model, sigma, dmax, opts)
         it += 1
         if inner == 0:
             if not fresh:   # re-centred derivatives gave no descent: expand afresh
                 maps, prev_dmax, fresh = None, np.inf, True
                 continue
-            reason = "no descent on the constraint model"
+            status = Status.NEWTON_NO_DESCENT
             break
         maps = StageMaps.of(model.F, X, U, opts.eps_da)
         X, U = model.apply(dY)
     if best is None:
-        return PolishResult(X0, U0, np.inf, False, False, it, reason, maps)
+        return NewtonResult(False, it, status, X0, U0, np.inf, False, maps)
     dbest, Xb, Ub = best
     # report the violation of all constraints (inactive inequalities included)
-    viol = max(dbest, total_violation(problem, Xb, Ub))
-    return PolishResult(Xb, Ub, viol, viol <= opts.tol_newton, True, it, reason, maps)
+    viol = max(dbest, problem.violation(Xb, Ub))
+    return NewtonResult(viol <= opts.tol_newton, it, status, Xb, Ub, viol, True, maps)
+
+
+def _factorise(model: _Model, scale: np.ndarray | None, reg: float) -> _BandedSigma | None:
+    """Sigma's factor, with a larger regularisation if it is not positive definite; None when
+    it is singular even then."""
+    for r in (reg, max(1e-8, 1e3 * reg)):
+        try:
+            return _BandedSigma(model.D, r, scale)
+        except (LinAlgError, ValueError):
+            continue
+    return None
+
+
+def _inner_iterations(model: _Model, sigma: _BandedSigma, dmax: float, opts: SolverOptions):
+    """Alg. 11's inner loop: Newton steps on the polynomial model, re-using the factorisation,
+    each backtracked until it reduces the model's max residual, while the model converges at a
+    rate r = log d*_max / log d_max above eps_CV. Returns (dY, number of steps taken)."""
+    d = model.residual()
+    dY = np.zeros(model.D.shape[1])
+    r = np.inf
+    inner = 0
+    while dmax > opts.tol_newton and r > opts.newton_cv_ratio and inner < opts.newton_inner_max_iter:
+        step = sigma.step(d)
+        alpha, dstar = 1.0, None
+        for _ in range(opts.newton_ls_max_halvings):
+            cand = model.residual(dY + alpha * step)
+            cmax = float(np.max(np.abs(cand)))
+            if np.isfinite(cmax) and cmax < dmax:
+                dstar = cand
+                break
+            alpha *= opts.newton_ls_shrink
+        if dstar is None:
+            break
+        dY = dY + alpha * step
+        d = dstar
+        new_max = float(np.max(np.abs(d)))
+        r = np.log(new_max) / np.log(dmax) if 0 < dmax < 1 and new_max > 0 else np.inf
+        dmax = new_max
+        inner += 1
+    return dY, inner

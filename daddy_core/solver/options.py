@@ -1,32 +1,72 @@
-"""Solver options: small typed objects instead of a 40-field parameter bag."""
+"""Solver options: small typed objects instead of a 40-field parameter bag, and the method
+enum of paper Table 1."""
 from __future__ import annotations
 
-from dataclasses import dataclass, field, fields, replace
+from dataclasses import dataclass, fields, replace
+from enum import Enum
 
 from ..errors import DaddyError
 
-METHODS = ("std", "hess", "q", "dyn", "hessdyn", "qdyn")  # paper Table 1
+
+class Sweep(Enum):
+    """Backward sweep: Std (Alg. 7), Hess (Alg. 9, with dynamics Hessians), Q (Alg. 10)."""
+
+    STD = "std"
+    HESS = "hess"
+    Q = "q"
+
+
+class Method(Enum):
+    """The six DDP variants of paper Table 1: a backward sweep, and whether the forward pass
+    is the Dyn one (Alg. 8) instead of Std (Alg. 6)."""
+
+    STD = "std"
+    HESS = "hess"
+    Q = "q"
+    DYN = "dyn"
+    HESSDYN = "hessdyn"
+    QDYN = "qdyn"
+
+    @property
+    def sweep(self) -> Sweep:
+        return Sweep(self.value.removesuffix("dyn") or "std")
+
+    @property
+    def dyn(self) -> bool:
+        return self.value.endswith("dyn")
+
+    @classmethod
+    def parse(cls, method: "Method | str") -> "Method":
+        """A Method from itself or its name; DaddyError naming the field otherwise."""
+        if isinstance(method, cls):
+            return method
+        try:
+            return cls(method)
+        except ValueError:
+            raise DaddyError(f"method must be one of {METHODS}, got {method!r}") from None
+
+
+METHODS = tuple(m.value for m in Method)
 
 
 @dataclass(frozen=True)
 class SolverOptions:
-    """Tolerances and algorithm parameters (defaults: the reference code's values).
+    """Tolerances and algorithm parameters (defaults: the reference code's values), grouped by
+    the part of the solver that reads them.
 
-    Attributes:
+    DDP (Alg. 3):
         tol_ddp: relative cost decrease that stops a DDP solve (after >= ddp_min_iter).
-        ddp_min_iter: iterations before the tol_ddp test applies (the reference: 3; a
-            warm start from a converged solution can stop after 1).
+        ddp_min_iter: iterations before the tol_ddp test applies (the reference: 3; a warm
+            start from a converged solution can stop after 1).
+        ddp_max_iter: iteration bound of one DDP solve.
         ddp_stop_on_prediction: also stop DDP, before the forward pass, when the backward
-            sweep predicts a relative decrease below tol_ddp / 10 for the full step (after
-            ddp_min_iter iterations) and the constraints meet tol_aul; a start that Newton
-            restored then needs no polishing either. From the restored start of an Earth-Mars
-            re-plan (predicted 1e-6 relative) it saves three forward passes and a polishing
-            iteration (bench re-plan ~60 -> 41 ms). Off by default: in cold solves skipping
-            those small steps changed the augmented-Lagrangian path (Earth-Mars fuel 603.16 kg
-            in 12 s instead of 603.46 kg in 3 s), and in the closed loop the plans it leaves
-            unoptimised cost propellant and arrival margin (GuidancePlanner).
-        tol_aul: maximum constraint violation that stops the augmented Lagrangian.
-        tol_newton: maximum constraint violation targeted by Newton polishing.
+            sweep predicts a relative decrease below ddp_predicted_stop_fraction * tol_ddp for
+            the full step (after ddp_min_iter iterations) and the constraints meet tol_aul; a
+            start that Newton restored then needs no polishing either. Off by default: skipping
+            those small steps changes the augmented-Lagrangian path of cold solves, and in the
+            closed loop the plans it leaves unoptimised cost propellant and arrival margin.
+        ddp_predicted_stop_fraction: that fraction (below tol_ddp itself, where the post-step
+            test would call the step's outcome converged anyway).
         rho_init, rho_min, rho_max, rho_factor: Quu regularisation schedule.
         ls_min_ratio, ls_max_ratio, ls_shrink, ls_max_halvings: backtracking line search; a step
             is accepted when actual / expected decrease is in (min, max).
@@ -35,34 +75,42 @@ class SolverOptions:
             damping of a model that promises too much, e.g. controls in the linear part of the
             pseudo-Huber cost). 0 (default): accepted steps never raise rho, as in the
             reference. A line search that fails altogether always raises rho by
-            ``short_step_rho_growth`` (the reference: by rho_factor; Earth-Mars fuel stalled for
-            693 forward passes at the start of an AUL iteration while rho crept up 1.6x per
-            failure, 97 with 10x, same optimum). ``short_step`` is set per case (halo
-            and DRO: 5x faster, and the halo reaches the reference's basin) and for warm re-plans;
-            not for Earth-Mars fuel, where the damped steps stop DDP early on the
-            relative-decrease test (600.64 kg instead of 603.47 kg).
+            ``short_step_rho_growth`` (the reference: by rho_factor, which let DDP stall for
+            hundreds of forward passes while rho crept up).
         carry_rho: each DDP solve of an AUL loop resumes from the previous one's rho instead
             of rho_init (each homotopy step restarts from rho_init or the warm start's rho:
-            carrying it across the halo's homotopy steps ended in a worse local optimum,
-            958.96 kg instead of 973.51 kg).
-        restore_warm_start: before DDP, drive the initial guess to feasibility with the Newton
-            polishing (Alg. 11); if DDP does not converge (e.g. the time budget), the solve
-            returns that feasible iterate (converged=False, with the reason).
-        polish_from_ddp_maps: start the Newton polishing from the DDP's last stage maps
-            (re-centred where the step stays inside their radius; every stage expanded afresh
-            once the exact residual stalls) instead of expanding every stage. Off by default:
-            in the closed loop, arrival-phase plans polished this way missed by up to 1.39 cm/s
-            (0.11 cm/s from fresh expansions); warm re-plans use it before the arrival phase.
-        ddp_max_iter, aul_max_iter, newton_max_iter: iteration bounds.
+            carried across homotopy steps it led the halo case to a worse local optimum).
+    Augmented Lagrangian (Alg. 4, eq. 8-9):
+        tol_aul: maximum constraint violation that stops the augmented Lagrangian.
+        aul_max_iter: outer iteration bound.
         lambda_max, mu_init, mu_max, mu_growth: multiplier bound and penalty schedule.
-        newton_cv_ratio: the polishing's convergence-rate threshold (eps_CV, paper Alg. 5).
-        newton_active_tol: an inequality with g > -tol is treated as active in the polishing.
+    Newton (Alg. 5 / 11):
+        tol_newton: maximum constraint violation targeted by Newton polishing.
+        newton_max_iter: outer iterations (one expansion each); newton_inner_max_iter: inner
+            iterations on one polynomial model; newton_ls_shrink, newton_ls_max_halvings: the
+            backtracking of an inner step (it must reduce the model's max residual).
+        newton_cv_ratio: the convergence-rate threshold (eps_CV, paper Alg. 5).
+        newton_active_tol: an inequality with g > -tol is treated as active.
         newton_regularisation: diagonal added to Delta Delta^T if it is not positive definite.
-        newton_control_weight_floor: the polishing's steps weigh each stage's control by
+        newton_control_weight_floor: the steps weigh each stage's control by
             max(|u_k| / u_max, floor)^2 (problems with a thrust bound), so that coasting stages
             keep coasting and the thrust arcs take the correction (see ``newton``); 0: the
             paper's plain minimum-norm steps.
-        homotopy: sequence of (h, delta) pairs for the fuel-optimal homotopy (h = Huber weight).
+        polish_from_ddp_maps: start the polishing from the DDP's last stage maps (re-centred
+            where the step stays inside their radius) instead of expanding every stage. Off by
+            default: maps re-centred again and again carry derivative errors, and closed-loop
+            arrival plans polished this way missed their target by more.
+    Warm start:
+        restore_warm_start: before DDP, drive the initial guess to feasibility with Newton
+            (``newton.restore``); if DDP does not converge (e.g. the time budget), the solve
+            returns that feasible iterate (converged=False, with the reason).
+        map_reach: Newton and the restoration's rollout re-centre stage maps up to this many
+            times their convergence radius (eps_da): Newton's residuals are exact, so
+            derivatives a little less accurate only slow its convergence, and an outer
+            iteration that does not reduce the residual expands afresh.
+    Homotopy (eq. 12-14):
+        homotopy: sequence of (h, delta) pairs (h = Huber weight, delta = Huber width).
+    Run:
         time_budget_s: wall-clock budget for the whole solve (None: unbounded).
         verbose: print progress lines (homotopy step, AUL iteration, violation, cost).
     """
@@ -86,6 +134,7 @@ class SolverOptions:
     ddp_max_iter: int = 200
     ddp_min_iter: int = 3
     ddp_stop_on_prediction: bool = False
+    ddp_predicted_stop_fraction: float = 0.1
     aul_max_iter: int = 40
     newton_max_iter: int = 60
     lambda_max: float = 1e8
@@ -96,6 +145,10 @@ class SolverOptions:
     newton_active_tol: float = 1e-6
     newton_regularisation: float = 1e-12
     newton_control_weight_floor: float = 1e-2
+    newton_inner_max_iter: int = 20
+    newton_ls_shrink: float = 0.5
+    newton_ls_max_halvings: int = 25
+    map_reach: float = 10.0
     homotopy: tuple = ((0.0, 1e-2),)
     time_budget_s: float | None = None
     verbose: bool = False
@@ -103,14 +156,16 @@ class SolverOptions:
     def __post_init__(self):
         for f in fields(self):
             v = getattr(self, f.name)
-            if f.name in ("homotopy", "verbose", "time_budget_s", "carry_rho", "restore_warm_start",
-                          "polish_from_ddp_maps", "ddp_stop_on_prediction"):
+            if f.name in ("homotopy", "time_budget_s") or f.type == "bool":
                 continue
             if not isinstance(v, (int, float)) or v != v or v < 0:
                 raise DaddyError(f"options.{f.name} must be a non-negative number, got {v!r}")
         for name in ("tol_ddp", "tol_aul", "tol_newton", "rho_max", "rho_factor", "mu_growth"):
             if getattr(self, name) <= 0:
                 raise DaddyError(f"options.{name} must be > 0")
+        for name in ("ls_shrink", "newton_ls_shrink"):
+            if not 0 < getattr(self, name) < 1:
+                raise DaddyError(f"options.{name} must be in (0, 1), got {getattr(self, name)!r}")
         if self.newton_control_weight_floor > 1:
             raise DaddyError("options.newton_control_weight_floor must be in [0, 1], got "
                              f"{self.newton_control_weight_floor!r}")
@@ -136,17 +191,6 @@ class SolverOptions:
         return replace(self, **kw)
 
 
-def parse_method(method: str) -> tuple[str, bool]:
-    """'qdyn' -> ('q', True): the backward sweep and whether the forward pass is Dyn (Alg. 8)."""
-    if method not in METHODS:
-        raise DaddyError(f"method must be one of {METHODS}, got {method!r}")
-    if method == "dyn":
-        return "std", True
-    if method.endswith("dyn"):
-        return method[:-3], True
-    return method, False
-
-
 def case_options(case, fuel_optimal: bool, **overrides) -> SolverOptions:
     """The paper's solver settings for a catalogue case."""
     s = case.solver
@@ -160,4 +204,4 @@ def case_options(case, fuel_optimal: bool, **overrides) -> SolverOptions:
     return SolverOptions(**kw)
 
 
-__all__ = ["METHODS", "SolverOptions", "parse_method", "case_options", "field"]
+__all__ = ["METHODS", "Method", "SolverOptions", "Sweep", "case_options"]

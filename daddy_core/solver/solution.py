@@ -1,4 +1,5 @@
-"""The result of a solve: trajectory, gains, figures of merit; JSON/NPZ round trip; warm start."""
+"""The result of a solve (trajectory, gains, figures of merit; JSON/NPZ round trip) and the warm
+start a next solve takes from it."""
 from __future__ import annotations
 
 import copy
@@ -8,14 +9,16 @@ from pathlib import Path
 
 import numpy as np
 
+from ..dynamics.units import Units
 from ..errors import DaddyError
+from .stage_maps import StageMaps
 
 
 @dataclass
 class Solution:
     """A solved (or best-so-far) trajectory.
 
-    Arrays are normalised (the problem's units); ``X_si`` / ``U_newton`` give SI views.
+    Arrays are normalised (the problem's units); ``X_si`` / ``thrust_n`` give SI views.
 
     Attributes:
         case, method, fuel_optimal, converged, reason: what was solved and how it ended.
@@ -55,7 +58,7 @@ class Solution:
     polynomial_share: float = 0.0
     duals: dict = field(default_factory=dict)  # {"lam": (n_c, N), "lam_t": (n_t,)} as lists
     rho: float = 0.0  # Quu regularisation at the end of the last DDP solve (warm starts resume it)
-    stage_maps: object = field(default=None, repr=False, compare=False)
+    stage_maps: StageMaps | None = field(default=None, repr=False, compare=False)
 
     _ARRAYS = ("X", "U", "stage_dt", "gains_a", "gains_b")
 
@@ -64,21 +67,14 @@ class Solution:
         return self.U.shape[0]
 
     @property
-    def U_newton(self) -> np.ndarray:
-        """Thrust in newtons (N, 3)."""
+    def thrust_n(self) -> np.ndarray:
+        """Controls in newtons (N, nu) (JSON: ``U_N``)."""
         return self.U * self.units.get("thrust_unit_n", 1.0)
 
     @property
     def X_si(self) -> np.ndarray:
-        """States in SI: position m, velocity m/s, mass kg (Cartesian systems)."""
-        u = self.units
-        X = self.X.copy()
-        if X.shape[1] >= 6 and u.get("system") in ("sun_two_body", "earth_moon_cr3bp"):
-            X[:, :3] *= u["lu_km"] * 1e3
-            X[:, 3:6] *= u["lu_km"] * 1e3 / u["tu_s"]
-        if X.shape[1] == 7:
-            X[:, 6] *= u.get("mu_kg", 1.0)
-        return X
+        """States in SI (``Units.states_si``; JSON: ``X_SI``)."""
+        return Units.from_dict(self.units).states_si(self.X)
 
     def to_dict(self) -> dict:
         d = {f.name: copy.deepcopy(getattr(self, f.name)) for f in fields(self)
@@ -88,7 +84,7 @@ class Solution:
         if d["repropagation_miss"] == np.inf:   # strict JSON has no infinity
             d["repropagation_miss"] = "inf"
         if self.units.get("thrust_unit_n"):
-            d["U_N"] = self.U_newton.tolist()
+            d["U_N"] = self.thrust_n.tolist()
             d["X_SI"] = self.X_si.tolist()
         return d
 
@@ -128,3 +124,35 @@ class Solution:
             for k in cls._ARRAYS:
                 d[k] = z[k]
         return cls.from_dict(d)
+
+
+@dataclass
+class WarmStart:
+    """What a solve starts from besides the problem: controls, and what a previous solution
+    lends a nearby solve.
+
+    Attributes:
+        U: (N, nu) initial controls (None: 1e-6 on every component).
+        duals: multipliers {"lam": (n_c, N), "lam_t": (n_t,)} (used where their shapes fit).
+        rho: Quu regularisation to resume from (None: ``SolverOptions.rho_init``).
+        maps: stage maps of a nearby trajectory with the problem's stages: the initial rollout
+            evaluates them where a stage lies inside their radius (Alg. 8) and the Newton
+            restoration re-centres them instead of expanding.
+    """
+
+    U: np.ndarray | None = None
+    duals: dict | None = None
+    rho: float | None = None
+    maps: StageMaps | None = None
+
+    @classmethod
+    def of(cls, guess, stage_dt: np.ndarray, carry_rho: bool) -> "WarmStart":
+        """A WarmStart from what ``solve`` accepts as a guess: a WarmStart, a ``Solution``
+        (its U and duals; its maps when its stage durations are ``stage_dt``; its rho with
+        ``carry_rho``) or controls."""
+        if isinstance(guess, WarmStart):
+            return guess
+        if isinstance(guess, Solution):
+            maps = guess.stage_maps if np.array_equal(guess.stage_dt, stage_dt) else None
+            return cls(guess.U, guess.duals, guess.rho if carry_rho else None, maps)
+        return cls(guess)

@@ -1,23 +1,28 @@
-"""DADDy orchestration (paper Fig. 1): fuel homotopy -> augmented Lagrangian -> DDP, then Newton
-polishing; validation of inputs before any iteration; the Solution with its figures."""
+"""DADDy orchestration (paper Fig. 1): validate -> warm start -> (Newton restoration) ->
+fuel homotopy (augmented Lagrangian -> DDP) -> Newton polishing -> Solution.
+
+Each step lives in its own module; this one only chains them and assembles the Solution.
+"""
 from __future__ import annotations
 
 import math
 import time
+from dataclasses import dataclass, field
 
 import numpy as np
 
 from ..errors import DaddyError
 from ..integrators import dop853
-from .aul import aul
+from ..problem import Problem
+from . import newton
 from .ddp import DDPStats
-from .expansion import Multipliers, StageMaps, max_violation, total_violation
-from .newton import MAP_REACH, exact_valued_maps, polish as newton_polish
-from .options import SolverOptions, parse_method
-from .solution import Solution
+from .homotopy import HomotopyResult, continuation, homotopy_steps
+from .options import Method, SolverOptions
+from .solution import Solution, WarmStart
+from .stage_maps import StageMaps
 
 
-def validate(problem, U0: np.ndarray) -> np.ndarray:
+def validate(problem: Problem, U0: np.ndarray) -> np.ndarray:
     """Check the initial guess and that every problem function returns finite values of the
     right shape at it, before any iteration. Returns U0 as a float (N, nu) array."""
     N, nu, nx = problem.N, problem.nu, problem.nx
@@ -66,15 +71,14 @@ def validate(problem, U0: np.ndarray) -> np.ndarray:
     return U0
 
 
-def repropagation_miss(problem, U: np.ndarray) -> float | None:
+def repropagation_miss(problem: Problem, U: np.ndarray) -> float | None:
     """Terminal miss (max terminal-constraint violation) after re-propagating U from x0 with
     DOP853 at rtol = atol = 1e-12, stage by stage (``integrators.dop853``: solve_ivp's scheme and
-    step control, 3x cheaper); inf when the re-propagation fails (NaN or inf dynamics).
+    step control); inf when the re-propagation fails (NaN or inf dynamics).
 
     Each stage's first trial step is the whole stage (scipy's initial-step heuristic costs two
-    rhs calls and usually picks a step that needs more steps: halo 62 -> 41 ms, Earth-Mars 24 ->
-    18 ms per check with solve_ivp); the error control still accepts only steps within the
-    tolerances."""
+    rhs calls and usually picks a shorter step); the error control still accepts only steps
+    within the tolerances."""
     if problem.rhs is None:
         x = problem.rollout(U)[-1]
     else:
@@ -85,198 +89,201 @@ def repropagation_miss(problem, U: np.ndarray) -> float | None:
                            atol=1e-12)
         except DaddyError:
             return math.inf
-    gt, nti = problem.terminal_constraints(x)
-    if gt is None:
+    if problem.terminal_constraints(x)[0] is None:
         return None
-    return max_violation(gt, nti)
+    return problem.terminal_violation(x)
 
 
-def objective(problem, X, U, hom) -> float:
+def objective(problem: Problem, X, U, hom) -> float:
     """The problem's own cost sum l + phi (no augmented-Lagrangian terms)."""
     return float(np.sum(problem.stage_cost(X[:-1].T, U.T, problem.stage_dt, hom))
                  + problem.terminal_cost(X[-1], problem.x_target))
 
 
-def solve(problem, u_guess=None, method: str = "dyn", fuel_optimal: bool | None = None,
-          polish: bool = True, options: SolverOptions | None = None, case_name: str | None = None,
-          progress=None, duals: dict | None = None, rho: float | None = None,
-          maps: StageMaps | None = None) -> Solution:
+@dataclass
+class _Clock:
+    """Start, deadline and the phase timings of one solve (``Solution.runtime_s``)."""
+
+    budget_s: float | None
+    start: float = field(default_factory=time.perf_counter)
+    times: dict = field(default_factory=dict)
+
+    @property
+    def deadline(self) -> float | None:
+        return None if self.budget_s is None else self.start + self.budget_s
+
+    def lap(self, name: str, since: float) -> float:
+        """Record the time since ``since`` as phase ``name``; returns now."""
+        now = time.perf_counter()
+        self.times[name] = now - since
+        return now
+
+
+@dataclass
+class _Start:
+    """The iterate the homotopy starts from (after the restoration, if any)."""
+
+    X: np.ndarray
+    U: np.ndarray
+    restored: newton.NewtonResult | None = None   # a converged restoration
+    restore_iterations: int = 0
+    F: object = None                             # DA stage maps at (X, U), if known
+
+
+@dataclass
+class _End:
+    """The final iterate and how the solve ended."""
+
+    X: np.ndarray
+    U: np.ndarray
+    maps: StageMaps | None
+    converged: bool
+    reason: str
+    newton_iterations: int
+
+
+def solve(problem: Problem, u_guess=None, method: Method | str = Method.DYN,
+          fuel_optimal: bool | None = None, polish: bool = True,
+          options: SolverOptions | None = None, case_name: str | None = None,
+          progress=None) -> Solution:
     """Solve ``problem`` with DADDy.
 
     Args:
         problem: a ``Problem``.
-        u_guess: (N, nu) initial controls, or a ``Solution`` to warm-start from (its U).
-        method: one of std, hess, q, dyn, hessdyn, qdyn (paper Table 1).
+        u_guess: (N, nu) initial controls, a ``Solution`` to warm-start from, or a
+            ``WarmStart`` (controls, duals, rho, stage maps); None: 1e-6 everywhere.
+        method: a ``Method`` or its name: std, hess, q, dyn, hessdyn, qdyn (paper Table 1).
         fuel_optimal: run the whole homotopy of ``options.homotopy`` (True) or only its first,
             energy-optimal step (False). None: True when the homotopy has more than one step.
         polish: finish with the Newton polishing (Alg. 11) to ``options.tol_newton``.
         options: ``SolverOptions``.
-        progress: callable receiving progress lines (or None).
-        duals: warm-start multipliers {"lam": (n_c, N), "lam_t": (n_t,)} (default: those of a
-            Solution given as ``u_guess``, when their shapes fit).
-        rho: warm-start Quu regularisation (default: that of a Solution given as ``u_guess``
-            when ``options.carry_rho``, else ``options.rho_init``).
-        maps: stage maps of a nearby trajectory with this problem's stages (default: those of
-            a Solution given as ``u_guess`` when its stage durations are this problem's). The
-            initial rollout then evaluates them where a stage lies inside their radius (Alg. 8)
-            and the Newton restoration re-centres them instead of expanding.
+        progress: callable receiving progress lines (or None; ``options.verbose``: print).
     Returns:
         a ``Solution``. A solve that fails returns ``converged=False`` with the reason and the
         best feasible-so-far iterate (never NaN).
     """
     opts = options or SolverOptions()
-    sweep, dyn = parse_method(method)
-    if isinstance(u_guess, Solution):
-        duals = duals if duals is not None else u_guess.duals
-        if maps is None and np.array_equal(u_guess.stage_dt, problem.stage_dt):
-            maps = u_guess.stage_maps
-        if rho is None and opts.carry_rho:
-            rho = u_guess.rho
-        u_guess = u_guess.U
-    if u_guess is None:
-        u_guess = np.full((problem.N, problem.nu), 1e-6)
-    U0 = validate(problem, u_guess)
-    hom_seq = opts.homotopy if (fuel_optimal or (fuel_optimal is None and len(opts.homotopy) > 1)) \
-        else opts.homotopy[:1]
-    fuel = len(hom_seq) > 1 or (hom_seq[0][0] > 0)
+    method = Method.parse(method)
+    warm = WarmStart.of(u_guess, problem.stage_dt, opts.carry_rho)
+    U0 = validate(problem, np.full((problem.N, problem.nu), 1e-6) if warm.U is None else warm.U)
+    steps = homotopy_steps(opts, fuel_optimal)
     if progress is None and opts.verbose:
         progress = print
-    t_start = time.perf_counter()
-    deadline = None if opts.time_budget_s is None else t_start + opts.time_budget_s
+    clock = _Clock(opts.time_budget_s)
     stats = DDPStats()
+    start = _warm_start(problem, U0, warm, opts, clock, progress)
+    t0 = time.perf_counter()
+    hres = continuation(problem, start.X, start.U, steps, method, opts, stats, clock.deadline,
+                        progress, rho=warm.rho, duals=warm.duals, F=start.F)
+    t0 = clock.lap("ddp", t0)
+    end = _finish(problem, hres, start, polish, opts, clock, progress)
+    return _assemble(problem, end, hres, steps, method, stats, clock, opts, case_name, polish)
+
+
+def _warm_start(problem: Problem, U0, warm: WarmStart, opts: SolverOptions, clock: _Clock,
+                progress) -> _Start:
+    """The initial rollout (through the warm start's maps where they reach) and, with
+    ``opts.restore_warm_start``, Newton's restoration of feasibility."""
+    maps = warm.maps
     if maps is not None and maps.N != problem.N:
         raise DaddyError(f"maps cover {maps.N} stages, the problem has {problem.N}")
     # a start for the Newton restoration only needs to be near (its residuals are exact): the
-    # maps then serve stages up to MAP_REACH radii (Earth-Mars bench re-plan: all 38 stages
-    # instead of 22, the other 16 integrated one by one; states within 1.1e-10 either way)
-    reach = MAP_REACH if opts.restore_warm_start else 1.0
+    # maps then serve stages up to map_reach radii
+    reach = opts.map_reach if opts.restore_warm_start else 1.0
     X = problem.rollout(U0) if maps is None else maps.rollout(problem, U0, reach)[0]
-    t_rollout = time.perf_counter() - t_start
+    t0 = clock.lap("rollout", clock.start)
     if not np.all(np.isfinite(X)):
         raise DaddyError("the initial guess propagates to a non-finite state")
-    U = U0
-    restored, restore_iters, F0, final_maps = None, 0, None, None
-    t0 = time.perf_counter()
+    start = _Start(X, U0)
     if opts.restore_warm_start:
-        # a feasible iterate first (Newton, Alg. 11), so that a solve stopped by its time budget
-        # still returns a trajectory that meets every constraint
-        pres = newton_polish(problem, X, U, opts, deadline, maps=maps)
-        restore_iters = pres.iterations
-        if pres.converged:
-            X, U = pres.X, pres.U
-            restored = (X, U)
-            final_maps = pres.maps
-            if pres.maps is not None:
+        res = newton.restore(problem, X, U0, opts, clock.deadline, maps=maps)
+        start.restore_iterations = res.iterations
+        if res.converged:
+            start.X, start.U, start.restored = res.X, res.U, res
+            if res.maps is not None:
                 # the DDP starts from the Newton model's maps, re-centred as Newton re-centres
-                # them (up to MAP_REACH radii: Earth-Mars re-plans, Jacobians within 1.5e-6 of
-                # fresh expansions either way), with the restored flows as their values
-                F0 = exact_valued_maps(problem, pres.maps, X, U, X[1:].T)
+                # them, with the restored flows as their values
+                start.F = newton.exact_valued_maps(problem, res.maps, res.X, res.U, res.X[1:].T,
+                                                   opts.map_reach)
         elif maps is not None and reach > 1:
-            X = maps.rollout(problem, U)[0]   # DDP starts from a consistent trajectory
+            start.X = maps.rollout(problem, U0)[0]   # DDP starts from a consistent trajectory
         if progress:
-            progress(f"warm start restored by Newton: {pres.iterations} iterations, max violation"
-                     f" {pres.max_violation:.2e} ({pres.reason})")
-    t_restore = time.perf_counter() - t0
-    t_aul = time.perf_counter()
-    best = (X, U)
-    aul_iters = 0
-    history = []
-    converged = True
-    reason = "converged"
-    st = gains = None
-    rho_last = opts.rho_init if rho is None else rho
-    mult = Multipliers.initial(problem, opts.mu_init)
-    if duals:
-        lam, lam_t = np.asarray(duals.get("lam", []), float), np.asarray(duals.get("lam_t", []), float)
-        if lam.shape == mult.lam.shape and lam_t.shape == mult.lam_t.shape and \
-                np.all(np.isfinite(lam)) and np.all(np.isfinite(lam_t)):
-            mult.lam[...] = lam
-            mult.lam_t[...] = lam_t
-    for i, hom in enumerate(hom_seq):
-        if progress:
-            progress(f"homotopy {i + 1}/{len(hom_seq)}: h = {hom[0]}, delta = {hom[1]}")
-        # each homotopy step is warm-started: controls and duals carry over, penalties restart
-        mult.mu[...] = opts.mu_init
-        mult.mu_t[...] = opts.mu_init
-        res = aul(problem, X, U, mult, hom, sweep, dyn, opts, stats, deadline, progress,
-                  rho0=rho, F=F0 if st is None else st.F)
-        gains = res.gains or gains
-        rho_last = res.rho
-        aul_iters += res.iterations
-        st = res.stages
-        mult = res.mult
-        X, U = st.X, st.U
-        if np.all(np.isfinite(X)) and np.all(np.isfinite(U)):
-            best = (X, U)
-        history.append({"h": hom[0], "delta": hom[1], "aul_iterations": res.iterations,
-                        "max_violation": res.max_violation, "cost": st.cost,
-                        "converged": res.converged, "reason": res.reason})
-        if not res.converged:
-            converged, reason = False, f"homotopy step {i + 1}: {res.reason}"
-            if res.reason == "time budget exceeded":
-                break
-    t_ddp = time.perf_counter() - t_aul
-    X, U = best
-    if st is not None and np.array_equal(st.X, X):
-        final_maps = StageMaps.of(st.F, st.X, st.U, opts.eps_da)
-    fallback = restored is not None and not converged
+            progress(f"warm start restored by Newton: {res.iterations} iterations, max violation"
+                     f" {res.max_violation:.2e} ({res.reason})")
+    clock.lap("restore", t0)
+    return start
+
+
+def _finish(problem: Problem, hres: HomotopyResult, start: _Start, polish: bool,
+            opts: SolverOptions, clock: _Clock, progress) -> _End:
+    """The homotopy's last finite iterate, or the restored warm start when the homotopy failed
+    after a restoration, then the Newton polishing (Alg. 11)."""
+    X, U, st = hres.X, hres.U, hres.stages
+    maps = start.restored.maps if start.restored is not None else None
+    if np.array_equal(st.X, X):
+        maps = StageMaps.of(st.F, st.X, st.U, opts.eps_da)
+    end = _End(X, U, maps, hres.converged, hres.reason, start.restore_iterations)
+    fallback = start.restored is not None and not hres.converged
     if fallback:  # DDP did not finish: return the feasible, Newton-restored warm start
-        X, U = restored
-        reason += "; returned the Newton-restored warm start"
-    newton_iters, t_newton = restore_iters, 0.0
+        end.X, end.U = start.restored.X, start.restored.U
+        end.reason += "; returned the Newton-restored warm start"
     # a DDP that took no step from the Newton-restored start (ddp_stop_on_prediction) leaves a
     # trajectory that meets the constraints to tol_newton: polishing would repeat its residual
-    untouched = (restored is not None and np.array_equal(X, restored[0])
-                 and np.array_equal(U, restored[1]))
+    untouched = (start.restored is not None and np.array_equal(end.X, start.restored.X)
+                 and np.array_equal(end.U, start.restored.U))
+    t0 = time.perf_counter()
     if polish and not fallback and not untouched:
-        t0 = time.perf_counter()
-        # fresh expansions first unless asked otherwise: the Dyn pass's maps, re-centred again
-        # and again, carry derivative errors (see SolverOptions.polish_from_ddp_maps)
-        pres = newton_polish(problem, X, U, opts, deadline,
-                             maps=final_maps if opts.polish_from_ddp_maps else None)
-        t_newton = time.perf_counter() - t0
-        newton_iters += pres.iterations
+        # fresh expansions unless asked otherwise (see SolverOptions.polish_from_ddp_maps)
+        res = newton.polish(problem, end.X, end.U, opts, clock.deadline,
+                            maps=end.maps if opts.polish_from_ddp_maps else None)
+        end.newton_iterations += res.iterations
         if progress:
-            progress(f"newton: {pres.iterations} iterations, max violation {pres.max_violation:.2e}"
-                     f" ({pres.reason})")
-        if pres.improved:
-            X, U = pres.X, pres.U
-            final_maps = pres.maps or final_maps
-        if not pres.converged:
-            converged = False
-            reason = f"newton polishing: {pres.reason}"
-    gmax = total_violation(problem, X, U)
+            progress(f"newton: {res.iterations} iterations, max violation {res.max_violation:.2e}"
+                     f" ({res.reason})")
+        if res.improved:
+            end.X, end.U = res.X, res.U
+            end.maps = res.maps or end.maps
+        if not res.converged:
+            end.converged, end.reason = False, f"newton polishing: {res.reason}"
+        clock.lap("newton", t0)
+    else:
+        clock.times["newton"] = 0.0
+    return end
+
+
+def _assemble(problem: Problem, end: _End, hres: HomotopyResult, steps: tuple, method: Method,
+              stats: DDPStats, clock: _Clock, opts: SolverOptions, case_name: str | None,
+              polish: bool) -> Solution:
+    """The Solution of the final iterate: figures of merit, the DOP853 re-propagation check,
+    timings, and what a warm start needs."""
+    X, U, converged, reason = end.X, end.U, end.converged, end.reason
+    gmax = problem.violation(X, U)
     if not polish and gmax > opts.tol_aul:
         converged = False
-    hom_last = hom_seq[-1]
-    units = problem.units
-    m_idx = problem.mass_index
-    final_mass = float(X[-1, m_idx] * units.mu_kg) if m_idx is not None else None
-    propellant = float((X[0, m_idx] - X[-1, m_idx]) * units.mu_kg) if m_idx is not None else None
+    units, m_idx = problem.units, problem.mass_index
     N, nu, nx = problem.N, problem.nu, problem.nx
     t0 = time.perf_counter()
     miss = repropagation_miss(problem, U)
-    t_repro = time.perf_counter() - t0
+    clock.lap("repropagation", t0)
     if miss is not None and not math.isfinite(miss):
         converged, reason = False, "the DOP853 re-propagation of the final controls failed"
-    sol = Solution(
-        case=case_name or problem.name, method=method, fuel_optimal=fuel, converged=converged,
-        reason=reason, X=X, U=U, stage_dt=problem.stage_dt.copy(),
+    t = clock.times
+    gains = hres.gains
+    return Solution(
+        case=case_name or problem.name, method=method.value,
+        fuel_optimal=len(steps) > 1 or (steps[0][0] > 0), converged=converged, reason=reason,
+        X=X, U=U, stage_dt=problem.stage_dt.copy(),
         gains_a=gains.a if gains else np.zeros((N, nu)),
         gains_b=gains.b if gains else np.zeros((N, nu, nx)),
-        cost=objective(problem, X, U, hom_last), max_violation=gmax, final_mass_kg=final_mass,
-        propellant_kg=propellant, repropagation_miss=miss,
-        iterations={"homotopy": len(history), "aul": aul_iters, "ddp": stats.iterations,
-                    "newton": newton_iters},
-        runtime_s={"total": time.perf_counter() - t_start, "rollout": t_rollout,
-                   "restore": t_restore, "ddp": t_ddp, "newton": t_newton,
+        cost=objective(problem, X, U, steps[-1]), max_violation=gmax,
+        final_mass_kg=float(X[-1, m_idx] * units.mu_kg) if m_idx is not None else None,
+        propellant_kg=float((X[0, m_idx] - X[-1, m_idx]) * units.mu_kg)
+        if m_idx is not None else None, repropagation_miss=miss,
+        iterations={"homotopy": len(hres.history), "aul": hres.aul_iterations,
+                    "ddp": stats.iterations, "newton": end.newton_iterations},
+        runtime_s={"total": time.perf_counter() - clock.start, "rollout": t["rollout"],
+                   "restore": t["restore"], "ddp": t["ddp"], "newton": t["newton"],
                    "forward": stats.forward_s, "expansion": stats.expansion_s,
-                   "backward": stats.backward_s, "repropagation": t_repro},
-        history=history,
-        units={"system": units.name, "lu_km": units.lu_km, "tu_s": units.tu_s,
-               "mu_kg": units.mu_kg, "thrust_unit_n": units.thrust_unit_n},
-        polynomial_share=stats.polynomial_share,
-        duals={"lam": mult.lam.tolist(), "lam_t": mult.lam_t.tolist()},
-        rho=float(rho_last), stage_maps=final_maps,
-    )
-    return sol
+                   "backward": stats.backward_s, "repropagation": t["repropagation"]},
+        history=hres.history, units=units.as_dict(), polynomial_share=stats.polynomial_share,
+        duals=hres.mult.as_duals(), rho=float(hres.rho), stage_maps=end.maps)

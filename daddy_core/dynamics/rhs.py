@@ -1,0 +1,43 @@
+"""The right-hand side type the integrators rely on.
+
+A right-hand side ``f(t, x, u) -> dx/dt`` is a plain function written once for floats, numpy
+arrays and DA (``models``). What an integrator may assume about it beyond that signature is
+stated on a ``Dynamics`` object, not on attributes set on the function: a plain callable given
+where a ``Dynamics`` is expected means the safe defaults.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Callable, Optional
+
+
+@dataclass(frozen=True)
+class Dynamics:
+    """A continuous right-hand side and what the integrators may rely on.
+
+    Attributes:
+        f: f(t, x, u) -> dx/dt, x (nx, *batch), u (nu, *batch) (floats, arrays or DA).
+        scalar_components: f reads x and u only by integer index (``x[0]``, ``u[2]``), so the
+            single-state float integrators may pass lists of Python floats, whose arithmetic
+            costs a third of numpy scalars'; False: f receives numpy arrays (always safe).
+        prepare_control: u -> u', applied once per integration (the control is constant over a
+            stage), whose result f receives as u: what depends on the control only is then not
+            recomputed at each Runge-Kutta stage (e.g. ``models.with_thrust_magnitude``).
+    """
+
+    f: Callable
+    scalar_components: bool = False
+    prepare_control: Optional[Callable] = None
+
+    def __call__(self, t, x, u):
+        """dx/dt with the control prepared (for callers outside the integrators)."""
+        return self.f(t, x, self.prepared(u))
+
+    def prepared(self, u):
+        """The control as ``f`` receives it during an integration."""
+        return u if self.prepare_control is None or u is None else self.prepare_control(u)
+
+
+def as_dynamics(rhs) -> Dynamics:
+    """``rhs`` itself if it is a ``Dynamics``, else a plain callable with the safe defaults."""
+    return rhs if isinstance(rhs, Dynamics) else Dynamics(rhs)

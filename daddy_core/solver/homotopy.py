@@ -1,0 +1,86 @@
+"""The fuel-optimal continuation of paper eq. 12-14: one augmented-Lagrangian solve per
+(h, delta) step of the pseudo-Huber stage cost, each warm-started from the previous one.
+
+h = 0 is the energy-optimal problem; raising h and shrinking delta moves the stage cost towards
+|u| (fuel). Controls and duals carry over between steps, the penalties restart from mu_init.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from ..problem import Problem
+from .aul import aul
+from .ddp import DDPStats, Gains, Stages
+from .lagrangian import Multipliers
+from .options import Method, SolverOptions
+from .results import Status
+
+
+@dataclass
+class HomotopyResult:
+    """The last finite iterate (X, U) and how the continuation ended.
+
+    Attributes:
+        X: (N+1, nx), U: (N, nu): the last iterate whose states and controls are all finite.
+        stages: the last AUL solve's expanded nominal (its maps serve warm starts).
+        mult: the multipliers at the end; gains: the last backward sweep's (or None).
+        rho: Quu regularisation at the end of the last DDP solve.
+        aul_iterations: summed over the steps; history: one summary dict per step.
+        converged: every step met tol_aul; reason: the first step that did not, and why.
+    """
+
+    X: np.ndarray
+    U: np.ndarray
+    stages: Stages
+    mult: Multipliers
+    gains: Gains | None
+    rho: float
+    aul_iterations: int = 0
+    history: list = field(default_factory=list)
+    converged: bool = True
+    reason: str = "converged"
+
+
+def homotopy_steps(opts: SolverOptions, fuel_optimal: bool | None) -> tuple:
+    """The (h, delta) steps to run: all of ``opts.homotopy`` for a fuel-optimal solve (None:
+    when it has more than one step), else its first, energy-optimal step."""
+    if fuel_optimal or (fuel_optimal is None and len(opts.homotopy) > 1):
+        return opts.homotopy
+    return opts.homotopy[:1]
+
+
+def continuation(problem: Problem, X, U, steps: tuple, method: Method, opts: SolverOptions,
+                 stats: DDPStats, deadline: float | None = None, progress=None,
+                 rho: float | None = None, duals: dict | None = None, F=None) -> HomotopyResult:
+    """Run the AUL (Alg. 4) on each homotopy step from (X, U) (F: their stage maps, if known;
+    duals: warm-start multipliers; rho: the Quu regularisation each step starts from). Stops
+    after a step that ran out of time."""
+    mult = Multipliers.initial(problem, opts.mu_init)
+    mult.take_duals(duals)
+    best, gains, history, aul_iterations = (X, U), None, [], 0
+    converged, reason = True, "converged"
+    res = None
+    for i, hom in enumerate(steps):
+        if progress:
+            progress(f"homotopy {i + 1}/{len(steps)}: h = {hom[0]}, delta = {hom[1]}")
+        mult.mu[...] = opts.mu_init
+        mult.mu_t[...] = opts.mu_init
+        st = Stages(problem, X, U, mult, hom, opts.eps_da, F=F if res is None else res.stages.F)
+        res = aul(st, method, opts, stats, deadline, progress, rho0=rho)
+        gains = res.gains or gains
+        aul_iterations += res.iterations
+        mult = res.mult
+        X, U = res.stages.X, res.stages.U
+        if np.all(np.isfinite(X)) and np.all(np.isfinite(U)):
+            best = (X, U)
+        history.append({"h": hom[0], "delta": hom[1], "aul_iterations": res.iterations,
+                        "max_violation": res.max_violation, "cost": res.stages.cost,
+                        "converged": res.converged, "reason": res.reason})
+        if not res.converged:
+            converged, reason = False, f"homotopy step {i + 1}: {res.reason}"
+            if res.status is Status.TIME_BUDGET:
+                break
+    return HomotopyResult(best[0], best[1], res.stages, mult, gains, res.rho, aul_iterations,
+                          history, converged, reason)

@@ -1,0 +1,41 @@
+"""How each stage of the solver ended: one ``Status`` enum for control flow and messages, and
+the result base class the DDP, AUL and Newton results share."""
+from __future__ import annotations
+
+from dataclasses import dataclass
+from enum import Enum
+
+
+class Status(Enum):
+    """Why a DDP solve (Alg. 3), an AUL loop (Alg. 4) or a Newton run (Alg. 11) stopped; the
+    value is the message reported in ``Solution.reason``."""
+
+    TIME_BUDGET = "time budget exceeded"
+    # DDP
+    DDP_CONVERGED = "relative cost decrease below tol_ddp"
+    DDP_PREDICTED = "predicted cost decrease below tol_ddp / 10"
+    DDP_MAX_ITER = "ddp_max_iter reached"
+    QUU_INDEFINITE = "Q_uu not positive definite up to rho_max"
+    LINE_SEARCH_FAILED = "line search failed up to rho_max"
+    # augmented Lagrangian
+    AUL_CONVERGED = "max violation below tol_aul"
+    AUL_MAX_ITER = "aul_max_iter reached"
+    # Newton
+    NEWTON_CONVERGED = "active constraints below tol_newton"
+    NEWTON_MAX_ITER = "newton_max_iter reached"
+    NEWTON_NAN = "constraint evaluation produced NaN"
+    NEWTON_SINGULAR = "Delta Delta^T is singular"
+    NEWTON_NO_DESCENT = "no descent on the constraint model"
+
+
+@dataclass
+class StepResult:
+    """What every solver stage reports: converged, its iteration count and why it stopped."""
+
+    converged: bool
+    iterations: int
+    status: Status
+
+    @property
+    def reason(self) -> str:
+        return self.status.value
