@@ -19,7 +19,7 @@ import numpy as np
 
 from daddy_core import da
 from daddy_core.integrators import rk4, rk78
-from daddy_core.problems import load_case
+from daddy_core.catalogue import load_case
 
 
 def timeit(fn, seconds: float) -> float:

@@ -11,8 +11,7 @@ import time
 
 import numpy as np
 
-from daddy_core.problem import problem_from_case
-from daddy_core.problems import load_case
+from daddy_core.catalogue import load_case, problem_from_case
 from daddy_core.solver import case_options, solve
 
 # (case, fuel-optimal, C++ reference CPU seconds, CasADi+IPOPT seconds) from issue #3

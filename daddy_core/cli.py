@@ -11,8 +11,7 @@ import sys
 import numpy as np
 
 from .errors import DaddyError
-from .problem import problem_from_case
-from .problems import list_cases, load_case
+from .catalogue import list_cases, load_case, problem_from_case
 from .solver import METHODS, Solution, case_options, solve
 
 

@@ -150,7 +150,7 @@ def rk78(rhs, x, u, t0, dt, tol: float = 1e-13, h0=None, max_steps: int = 10_000
         return _rk78_single(dyn, x, u, float(t0), float(dt), tol, h0, max_steps, stats)
     if real and x.ndim == 2 and x.shape[1] <= _SINGLE_BATCH and stats is None:
         # a few float states: one at a time in plain Python beats numpy on (nx, B) arrays
-        # (Earth-Mars, one stage: ~0.6 ms instead of ~5 ms); same steps as the batched path
+        # (numpy's per-call overhead dominates on 7 x B arrays); same steps as the batched path
         B = x.shape[1]
         u, t0, dt = (np.broadcast_to(np.asarray(v, dtype=float), s) for v, s in
                      ((u, (np.shape(u)[0], B)), (t0, (B,)), (dt, (B,))))
@@ -218,8 +218,8 @@ def _single_step(nx: int):
     """One RK78 step of an nx-component state in plain Python floats, generated as straight-line
     code: ``step(rhs, state, t, x, u, hs) -> (x_new, err)`` with x, x_new lists of nx floats, err
     the scaled error estimate (raises on a non-finite one). Unrolled, the ~60 combinations
-    x + (a_ij h) k_j of a step cost local-variable arithmetic only (~30 us a step here; loops over
-    lists cost ~75 us), summed left to right in j as the loops did (bit-identical results)."""
+    x + (a_ij h) k_j of a step cost local-variable arithmetic only (loops over lists cost more
+    than twice as much), summed left to right in j as the loops did (bit-identical results)."""
     comps = range(nx)
 
     def combo(prefix, rows, m):   # x_m + (c_j h) k_j,m + ... evaluated left to right

@@ -32,7 +32,7 @@ from std_srvs.srv import Trigger
 from trajectory_msgs.msg import JointTrajectory
 
 from daddy_core.errors import DaddyError
-from daddy_core.problems import list_cases, load_case
+from daddy_core.catalogue import list_cases, load_case
 from daddy_core.solver import METHODS
 
 from . import conversions as cv

@@ -17,8 +17,7 @@ from pathlib import Path
 import numpy as np
 
 from daddy_core.errors import DaddyError
-from daddy_core.problem import problem_from_case
-from daddy_core.problems import load_case
+from daddy_core.catalogue import load_case, problem_from_case
 from daddy_core.solver import Solution, WarmStart, case_options, solve
 from daddy_core.da import functions as dm
 from daddy_core.solver.stage_maps import StageMaps, expand_dynamics

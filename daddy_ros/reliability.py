@@ -801,8 +801,7 @@ def core_api(sizes: Sizes, workdir: Path) -> list[Row]:
     from hypothesis import strategies as st
 
     from daddy_core.errors import DaddyError
-    from daddy_core.problem import problem_from_case
-    from daddy_core.problems import load_case
+    from daddy_core.catalogue import load_case, problem_from_case
     from daddy_core.solver import SolverOptions, solve
 
     good = problem_from_case(load_case("double_integrator"))

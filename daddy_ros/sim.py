@@ -8,7 +8,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from daddy_core.integrators import rk78
-from daddy_core.problems import load_case
+from daddy_core.catalogue import load_case
 
 
 @dataclass(frozen=True)

@@ -6,7 +6,7 @@ import pytest
 
 from daddy_core.dynamics import Spacecraft
 from daddy_core.errors import DaddyError
-from daddy_core.problems import case_from_dict, list_cases, load_case
+from daddy_core.catalogue import case_from_dict, list_cases, load_case
 
 EXPECTED = {  # name: (tof days, N)
     "earth_mars": (348.79, 40), "halo_l2_l1": (20, 110), "nrho_dro": (21.2, 150),
@@ -68,3 +68,15 @@ def test_bad_case_fields_are_named(field, value, msg):
 def test_unknown_case_lists_known():
     with pytest.raises(DaddyError, match="halo_l2_l1"):
         load_case("no_such_case")
+
+
+def test_problem_settings_are_apart_from_solver_settings():
+    # case files hold the problem's gains under "problem"; one left among the solver's settings
+    # (the old layout) is named with where it belongs, not silently ignored
+    d = json.loads((load_case.__globals__["CASES_DIR"] / "halo_l2_l1.json").read_text())
+    c = case_from_dict(d)
+    assert c.problem["terminal_cost_gain"] == 1e6 and "terminal_cost_gain" not in c.solver
+    assert "tol_aul" in c.solver and "tol_aul" not in c.problem
+    d["solver"]["stage_cost_gain"] = d["problem"].pop("stage_cost_gain")
+    with pytest.raises(DaddyError, match="solver.stage_cost_gain' belongs in 'problem'"):
+        case_from_dict(d)

@@ -6,7 +6,7 @@ import pytest
 
 from daddy_core import da
 from daddy_core.integrators import rk4, rk78
-from daddy_core.problems import load_case
+from daddy_core.catalogue import load_case
 
 CASE = load_case("halo_l2_l1")
 RHS = CASE.rhs()

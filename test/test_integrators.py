@@ -8,7 +8,7 @@ from daddy_core.dynamics import Dynamics, models
 from daddy_core.dynamics.units import earth_units
 from daddy_core.errors import DaddyError
 from daddy_core.integrators import dop853, rk4, rk78
-from daddy_core.problems import load_case
+from daddy_core.catalogue import load_case
 
 
 def reference(rhs, x0, u, T):

@@ -6,8 +6,8 @@ import numpy as np
 import pytest
 
 from daddy_core.errors import DaddyError
-from daddy_core.problem import Problem, problem_from_case
-from daddy_core.problems import load_case
+from daddy_core.problem import Problem
+from daddy_core.catalogue import load_case, problem_from_case
 from daddy_core.solver import METHODS, Solution, SolverOptions, case_options, solve
 
 DI = load_case("double_integrator")

@@ -107,12 +107,6 @@ class DA:
         H[..., diag, diag] *= 2.0
         return H
 
-    def coefficients(self, degree: int) -> np.ndarray:
-        """All coefficients of one total degree, shape ``(n_monomials_of_degree, *shape)``."""
-        if not 0 <= degree <= self.order:
-            raise DaddyError(f"degree must be in [0, {self.order}], got {degree}")
-        return self.c[self.T.block[degree]]
-
     def derivative_tensor(self, degree: int) -> np.ndarray:
         """Coefficients of ``degree`` multiplied by the exponent factorials (partial derivatives)."""
         b = self.T.block[degree]

@@ -30,7 +30,6 @@ class MonomialTables:
     Attributes:
         n, k: number of variables and truncation order.
         size: number of monomials M = C(n + k, k).
-        degree: (M,) total degree of each monomial.
         exponents: (M, n) exponent of each variable in each monomial.
         block: list of k + 1 slices; ``block[d]`` selects the degree-d monomials.
         parent, parent_var: (M,) for degree >= 1, monomial m = parent[m] * x[parent_var[m]];
@@ -48,7 +47,6 @@ class MonomialTables:
     n: int
     k: int
     size: int
-    degree: np.ndarray
     exponents: np.ndarray
     block: tuple
     parent: np.ndarray
@@ -82,7 +80,6 @@ def tables(n: int, k: int) -> MonomialTables:
         blocks.append(slice(start, len(monos)))
     index = {m: i for i, m in enumerate(monos)}
     size = len(monos)
-    degree = np.array([len(m) for m in monos])
     exponents = np.zeros((size, n), dtype=np.int64)
     for i, m in enumerate(monos):
         for v in m:
@@ -108,7 +105,7 @@ def tables(n: int, k: int) -> MonomialTables:
     ti, tj = np.triu_indices(n)
     fact = np.array([np.prod([math.factorial(int(e)) for e in row]) for row in exponents], dtype=float)
     return MonomialTables(
-        n=n, k=k, size=size, degree=degree, exponents=exponents, block=tuple(blocks),
+        n=n, k=k, size=size, exponents=exponents, block=tuple(blocks),
         parent=parent, parent_var=parent_var,
         pair_i=pair_i, pair_j=pair_j, pair_target=pair_target, pair_starts=pair_starts,
         triu_i=ti, triu_j=tj, offdiag=ti != tj, factorial=fact,

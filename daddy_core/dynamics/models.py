@@ -74,8 +74,8 @@ def cr3bp(mu: float, exhaust_speed: float):
     """Earth-Moon circular restricted three-body problem with mass (paper eq. 19).
 
     Rotating barycentric frame; primaries at (-mu, 0, 0) and (1 - mu, 0, 0). Written on scalar
-    components: on one float state every operation is a numpy scalar operation (~0.1 us; small
-    stacked arrays cost ~1 us per operation, which made the rhs 3x slower), and on DA the
+    components: on one float state every operation is a scalar operation (small stacked arrays
+    cost an order of magnitude more per operation), and on DA the
     product count is within a few of a stacked form.
     """
     gm1, gm2 = 1.0 - mu, mu

@@ -125,8 +125,8 @@ def _feedback_map(ak: np.ndarray, bk: np.ndarray) -> da.DA:
 def _regularised_inverse(Quu: np.ndarray, rho: float) -> np.ndarray | None:
     """(Quu + rho I)^-1 from its Cholesky factor L (M^-1 = L^-T L^-1), or None when Quu + rho I
     is not positive definite (or not finite). Plain Python on the nu x nu entries (the lower
-    triangle is read): numpy's cholesky + solve cost ~35 us per stage in call overhead, this
-    ~15 us for nu = 3, and the unrolled 3 x 3 case ~6 us (this VM)."""
+    triangle is read): for nu x nu blocks numpy's cholesky + solve cost more in call overhead
+    than the arithmetic, and the 3 x 3 case (a thrust vector) is unrolled."""
     if Quu.shape == (3, 3):
         return _regularised_inverse_3(Quu, rho)
     A = Quu.tolist()
@@ -199,6 +199,22 @@ def _bordered(grad: np.ndarray, hess: np.ndarray) -> np.ndarray:
     return B
 
 
+def _stage_q(st: Stages, k: int, Lk, Jbk, Vb, sweep: Sweep, fzz):
+    """Q_k of stage k as bordered matrices: (Gauss-Newton Q, the sweep's Q) -- the same object
+    for Std."""
+    nx, n = st.problem.nx, st.n
+    Qb_gn = Lk + Jbk.T @ Vb @ Jbk                          # eq. 3 without dynamics Hessians
+    if sweep is Sweep.Q:
+        # Alg. 10: P_Q = P_l + P_V(P_f - x_{k+1}); derivatives read from its coefficients
+        pq = da.compose(_quadratic_da(Vb[:nx, nx], Vb[:nx, :nx]), st.F[:, k] - st.X[k + 1])
+        return Qb_gn, Lk + _bordered(pq.gradient(), pq.hessian())
+    if fzz is not None:                                     # Alg. 9: + sum_i V_x^i f^i_zz
+        Qb = Qb_gn.copy()
+        Qb[:n, :n] += np.tensordot(Vb[:nx, nx], fzz[k], axes=(0, 0))
+        return Qb_gn, Qb
+    return Qb_gn, Qb_gn
+
+
 def backward_sweep(st: Stages, sweep: Sweep, rho: float) -> Gains | None:
     """One backward sweep; returns None when Q_uu + rho I is not positive definite.
 
@@ -224,15 +240,7 @@ def backward_sweep(st: Stages, sweep: Sweep, rho: float) -> Gains | None:
     K = np.empty((N, nu, n + 1))    # Minv [Q_ux, Q_uu, Q_u] = -[b_k, ., a_k] of every stage
     Qu_rows = np.empty((N, nu, n + 1))   # [Q_ux, Q_uu, Q_u] of every stage, for dv1, dv2
     for k in range(N - 1, -1, -1):
-        Qb_gn = L[k] + Jb[k].T @ Vb @ Jb[k]                # eq. 3 without dynamics Hessians
-        Qb = Qb_gn
-        if sweep is Sweep.Q:
-            # Alg. 10: P_Q = P_l + P_V(P_f - x_{k+1}); derivatives read from its coefficients
-            pq = da.compose(_quadratic_da(Vb[:nx, nx], Vb[:nx, :nx]), st.F[:, k] - st.X[k + 1])
-            Qb = L[k] + _bordered(pq.gradient(), pq.hessian())
-        elif fzz is not None:                              # Alg. 9: + sum_i V_x^i f^i_zz
-            Qb = Qb_gn.copy()
-            Qb[:n, :n] += np.tensordot(Vb[:nx, nx], fzz[k], axes=(0, 0))
+        Qb_gn, Qb = _stage_q(st, k, L[k], Jb[k], Vb, sweep, fzz)
         Minv = _regularised_inverse(Qb[nx:n, nx:n], rho)
         if Minv is None and Qb is not Qb_gn:
             # the dynamics-Hessian terms make Q_uu indefinite at this stage (e.g. the mass-flow
@@ -271,8 +279,7 @@ def forward_pass(st: Stages, gains: Gains, alpha: float, dyn: bool):
         X* (N+1, nx), U* (N, nu), poly (N,) bool: stage propagated by the stored map,
         dz (n, N): the stage deviations [dx; du] from the nominal, ok: every state finite and
         every mass positive (a stage that fails either ends the pass: thrust / mass has no
-        meaning beyond, and an Earth-Mars cold re-solve whose steps ran the mass negative
-        never recovered).
+        meaning beyond, and a trajectory whose mass went negative does not recover).
     """
     p = st.problem
     N, nx, nu = p.N, p.nx, p.nu
@@ -327,6 +334,25 @@ def _raise_rho(rho: float, opts: SolverOptions, growth: float | None = None) -> 
 def _lower_rho(rho: float, opts: SolverOptions) -> float:
     r = rho / opts.rho_factor
     return r if r >= opts.rho_min else 0.0
+
+
+def _rho_after_step(rho: float, alpha: float, opts: SolverOptions) -> float:
+    """Lower rho after an accepted step, unless it was shortened below opts.short_step: then
+    the quadratic model promised far more than the step delivered (e.g. controls in the linear
+    part of the pseudo-Huber cost, whose tiny curvature asks for huge steps), and rho is raised,
+    Levenberg-Marquardt-like, rather than crawl on with tiny alphas."""
+    if alpha < opts.short_step:
+        return _raise_rho(rho, opts, opts.short_step_rho_growth)
+    return _lower_rho(rho, opts)
+
+
+def _predicted_stop(st: Stages, full_step_gain: float, it: int, opts: SolverOptions) -> bool:
+    """SolverOptions.ddp_stop_on_prediction: converged before any step when the full step's
+    predicted relative decrease is small and the constraints are met to tol_aul (else the small
+    steps are how the augmented Lagrangian makes progress)."""
+    return (opts.ddp_stop_on_prediction and it >= opts.ddp_min_iter
+            and 0.0 <= full_step_gain < opts.ddp_predicted_stop_fraction * opts.tol_ddp
+            and st.problem.violation(st.X, st.U) <= opts.tol_aul)
 
 
 def _sweep(st: Stages, sweep: Sweep, rho: float, stats: DDPStats) -> Gains | None:
@@ -388,13 +414,8 @@ def ddp(st: Stages, method: Method, opts: SolverOptions, stats: DDPStats,
                 return result(False, it, Status.QUU_INDEFINITE)
             continue
         last = gains
-        # SolverOptions.ddp_stop_on_prediction: converged before any step when the full step's
-        # predicted decrease is small and the constraints are met to tol_aul (else the small
-        # steps are how the augmented Lagrangian makes progress)
         full_step_gain = -(gains.dv1 + gains.dv2) / max(abs(J), 1e-300)
-        if opts.ddp_stop_on_prediction and it >= opts.ddp_min_iter and \
-                0.0 <= full_step_gain < opts.ddp_predicted_stop_fraction * opts.tol_ddp and \
-                p.violation(st.X, st.U) <= opts.tol_aul:
+        if _predicted_stop(st, full_step_gain, it, opts):
             return result(True, it - 1, Status.DDP_PREDICTED)
         t0 = time.perf_counter()
         step = _line_search(st, gains, alpha if method.dyn else 1.0, method.dyn, opts, J)
@@ -414,13 +435,7 @@ def ddp(st: Stages, method: Method, opts: SolverOptions, stats: DDPStats,
         stats.expansion_s += time.perf_counter() - t0
         rel = (J - Jn) / max(abs(J), 1e-300)
         J = st.cost
-        if a < opts.short_step:
-            # the quadratic model promised far more than the step delivered (e.g. controls in the
-            # linear part of the pseudo-Huber cost, whose tiny curvature asks for huge steps):
-            # damp it, Levenberg-Marquardt-like, rather than crawl on with tiny alphas
-            rho = _raise_rho(rho, opts, opts.short_step_rho_growth)
-        else:
-            rho = _lower_rho(rho, opts)
+        rho = _rho_after_step(rho, a, opts)
         if method.dyn:
             alpha = min(1.0, 2.0 * a)
         # converged when the decrease is small for a (nearly) full step: a small decrease after a

@@ -3,7 +3,10 @@
 A case file holds the system name, the initial and target states (in the units named by
 ``state_units``: ``normalized``, ``km_km_s`` or ``keplerian_km_deg`` = [a km, e, i, RAAN, argp,
 true anomaly deg]), the time of flight in days (or ``stage_duration`` for dimensionless
-systems), the stage count, the spacecraft and the solver settings used in the paper.
+systems), the stage count, the spacecraft, and two groups of settings used in the paper:
+``problem`` (what defines the optimal-control problem: cost gains, the integrator tolerance of
+the stage maps) and ``solver`` (how it is solved: tolerances, regularisation bound, homotopy
+steps, the initial thrust guess).
 """
 from __future__ import annotations
 
@@ -21,6 +24,7 @@ from ..errors import DaddyError
 CASES_DIR = Path(__file__).with_name("cases")
 SYSTEMS = tuple(SYSTEM_UNITS)
 STATE_UNITS = ("normalized", "km_km_s", "keplerian_km_deg")
+PROBLEM_KEYS = ("stage_cost_gain", "terminal_cost_gain", "integrator_tol")
 
 
 @dataclass(frozen=True)
@@ -35,7 +39,8 @@ class Case:
         x_target: (nx,) normalised target (mass entry = x0's, unused by the terminal conditions).
         tof: total time of flight, normalised.
         stages: number of stages N.
-        solver: paper solver settings (gains, tolerances, homotopy sequence).
+        problem: problem settings (stage_cost_gain, terminal_cost_gain, integrator_tol).
+        solver: solver settings (tolerances, rho_max, homotopy sequence, u_guess_n, ...).
     """
 
     name: str
@@ -47,17 +52,10 @@ class Case:
     x_target: np.ndarray
     tof: float
     stages: int
+    problem: dict = field(default_factory=dict)
     solver: dict = field(default_factory=dict)
 
-    @property
-    def stage_duration(self) -> float:
-        return self.tof / self.stages
-
-    @property
-    def has_mass(self) -> bool:
-        return self.spacecraft is not None
-
-    def rhs(self):
+    def rhs(self) -> models.Dynamics | None:
         """Continuous right-hand side rhs(t, x, u), or None for a discrete system."""
         if self.system == "double_integrator":
             return None
@@ -108,6 +106,10 @@ def case_from_dict(d: dict) -> Case:
     stages = need("stages")
     if not (isinstance(stages, int) and stages >= 1):
         raise DaddyError(f"case field 'stages' must be a positive integer, got {stages!r}")
+    moved = sorted(set(d.get("solver", {})) & set(PROBLEM_KEYS))
+    if moved:
+        raise DaddyError(f"case field 'solver.{moved[0]}' belongs in 'problem' (problem settings: "
+                         f"{', '.join(PROBLEM_KEYS)})")
     x0 = _vector(need("x0"), "x0", 6)
     xt = _vector(need("x_target"), "x_target", 6)
 
@@ -132,7 +134,7 @@ def case_from_dict(d: dict) -> Case:
         xt = np.append(xt, m0)
     return Case(name=name, description=str(d.get("description", "")), system=system, units=units,
                 spacecraft=spacecraft, x0=x0, x_target=xt, tof=tof, stages=stages,
-                solver=dict(d.get("solver", {})))
+                problem=dict(d.get("problem", {})), solver=dict(d.get("solver", {})))
 
 
 def _vector(v, name: str, size: int) -> np.ndarray:
