@@ -56,7 +56,7 @@ monte-carlo: $(STAMP)
 	OPENBLAS_NUM_THREADS=1 OMP_NUM_THREADS=1 $(VENV)/bin/gnc_demo --case $(DEMO_CASE) --runs $(or $(RUNS),100)
 
 reliability: $(STAMP)
-	$(VENV)/bin/daddy_reliability $(if $(QUICK),--quick)
+	cd test && ../$(PY) -m reliability $(if $(QUICK),--quick)
 
 bench: $(STAMP)
 	cd bench && ../$(PY) bench_da.py && ../$(PY) bench_solver.py && ../$(PY) bench_replan.py

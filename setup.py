@@ -30,7 +30,6 @@ setup(
             "daddy = daddy_core.cli:main",
             "guidance_node = daddy_ros.guidance_node:main",
             "gnc_demo = daddy_ros.demo:main",
-            "daddy_reliability = daddy_ros.reliability:main",
         ],
     },
 )

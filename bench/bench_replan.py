@@ -89,13 +89,14 @@ def end_to_end(trials: int = 5):
     import rclpy
 
     from daddy_ros.demo import RosLink
-    from daddy_ros.guidance_node import GuidanceNode, spin_in_thread
+    from daddy_ros.guidance_node import GuidanceNode
+    from daddy_ros.spin import SpinThread
     rclpy.init()
     g = GuidanceNode(scenario="earth_mars", frame_id="sun_ecliptic", time_budget_s=600.0)
     planner, _ = nominal_planner("earth_mars", 600.0)
     g.adopt_plan(planner.plan)
     link = RosLink("sun_ecliptic", 600.0)
-    spinners = [spin_in_thread(g), spin_in_thread(link.node)]
+    spinner = SpinThread(g)
     link.wait_connected()
     rng = np.random.default_rng(1)
     lat = []
@@ -106,8 +107,8 @@ def end_to_end(trials: int = 5):
         level, dt = link.replan(p, v, m, t, f"e2e-{i}")
         lat.append(dt * 1e3)
     g.stop()
-    for sp in spinners:
-        sp.shutdown()
+    spinner.shutdown()
+    link.close()
     rclpy.try_shutdown()
     print(f"end-to-end trigger -> schedule received (Earth-Mars, ROS 2 loopback): median "
           f"{statistics.median(lat):.0f} ms, max {max(lat):.0f} ms over {trials}")

@@ -14,7 +14,6 @@ import argparse
 import concurrent.futures
 import os
 import statistics
-import threading
 import time
 from pathlib import Path
 
@@ -51,101 +50,46 @@ class DirectLink:
         return plan.epoch_s + plan.stage_start_s if plan else np.zeros(0)
 
 
-def _level(level) -> int:
-    """DiagnosticStatus.level is a byte in rclpy: as an int."""
-    return level[0] if isinstance(level, (bytes, bytearray)) else int(level)
-
-
 class RosLink:
-    """Guidance over ROS 2 topics: the GNC side of the loop (estimates and requests out,
-    schedules and diagnostics in)."""
+    """Guidance over ROS 2 topics (``client.GuidanceClient``): the GNC side of the loop
+    (estimates and requests out, schedules and diagnostics in)."""
 
     def __init__(self, frame_id: str, timeout_s: float):
-        import rclpy
-        from diagnostic_msgs.msg import DiagnosticArray
-        from geometry_msgs.msg import InertiaStamped
-        from nav_msgs.msg import Odometry
-        from rclpy.node import Node
-        from std_msgs.msg import Header
-        from trajectory_msgs.msg import JointTrajectory
-
-        from . import conversions as cv
-        from .guidance_node import LATCHED, RELIABLE
-
-        self.cv, self.Header, self.InertiaStamped = cv, Header, InertiaStamped
-        self.node = Node("daddy_gnc_sim")
-        self.frame_id = frame_id
+        from .client import GuidanceClient
+        self.client = GuidanceClient(frame_id, name="daddy_gnc_sim")
+        self.node = self.client.node
         self.timeout_s = timeout_s
-        self.pub_state = self.node.create_publisher(Odometry, "state_estimate", RELIABLE)
-        self.pub_mass = self.node.create_publisher(InertiaStamped, "mass_estimate", RELIABLE)
-        self.pub_req = self.node.create_publisher(Header, "replan_request", RELIABLE)
-        self.schedule = None
-        self.n_schedules = 0
-        self.diags = {}
-        self.cond = threading.Condition()
-        self.node.create_subscription(JointTrajectory, "control_schedule", self._on_schedule, LATCHED)
-        self.node.create_subscription(DiagnosticArray, "/diagnostics", self._on_diag, RELIABLE)
-        del rclpy
-
-    def _on_schedule(self, msg):
-        t, u = self.cv.joint_trajectory_to_schedule(msg)
-        with self.cond:
-            self.schedule = (self.cv.stamp_to_s(msg.header.stamp), t, u)
-            self.n_schedules += 1
-            self.cond.notify_all()
-
-    def _on_diag(self, msg):
-        with self.cond:
-            for st in msg.status:
-                vals = {kv.key: kv.value for kv in st.values}
-                if "request_id" in vals:
-                    self.diags[vals["request_id"]] = (_level(st.level), st.message,
-                                                      vals.get("plan_kept") == "no")
-            self.cond.notify_all()
 
     def publish_estimate(self, pos, vel, mass, t_s):
-        m = self.InertiaStamped()
-        m.header = self.Header(stamp=self.cv.s_to_stamp(t_s), frame_id=self.frame_id)
-        m.inertia.m = float(mass)
-        self.pub_mass.publish(m)
-        self.pub_state.publish(self.cv.state_to_odometry(pos, vel, t_s, self.frame_id))
+        self.client.publish_estimate(pos, vel, mass, t_s)
 
     def wait_connected(self, timeout_s=15.0):
         """Poll (never a fixed sleep) until the guidance node subscribes to our topics and its
         latched schedule has reached us."""
-        end = time.monotonic() + timeout_s
-        while time.monotonic() < end:
-            with self.cond:
-                have_schedule = self.schedule is not None
-            if (have_schedule and self.pub_state.get_subscription_count()
-                    and self.pub_req.get_subscription_count()
-                    and self.pub_mass.get_subscription_count()):
-                return True
-            time.sleep(0.05)
-        return False
+        c = self.client
+        return bool(c.wait_for(lambda: c.schedules and c.pub_state.get_subscription_count()
+                               and c.pub_req.get_subscription_count()
+                               and c.pub_mass.get_subscription_count(), timeout_s))
 
     def replan(self, pos, vel, mass, t_s, rid):
+        c = self.client
         self.publish_estimate(pos, vel, mass, t_s)
         time.sleep(0.02)  # let the estimate arrive before the request (same reliable link)
         t0 = time.perf_counter()
-        self.pub_req.publish(self.Header(stamp=self.cv.s_to_stamp(t_s), frame_id=rid))
-        end = time.monotonic() + self.timeout_s
-        with self.cond:
-            while rid not in self.diags and time.monotonic() < end:
-                self.cond.wait(0.05)
-            level = self.diags.pop(rid, (None, "timeout", False))
+        n_diags = len(c.diags)
+        c.request(rid, t_s)
+        diag = c.wait_for(lambda: c.diag_for(rid, n_diags), self.timeout_s)
+        level, text, vals = diag or (None, "timeout", {})
         # when a new plan was stored, wait for its schedule (latched, stamped with the estimate
         # time); otherwise the last valid schedule stays in force
-        with self.cond:
-            while level[2] and (self.schedule is None or self.schedule[0] < t_s - 1e-3) and \
-                    time.monotonic() < end:
-                self.cond.wait(0.05)
+        if vals.get("plan_kept") == "no":
+            c.wait_for(lambda: (c.latest_schedule() or (-np.inf,))[0] >= t_s - 1e-3,
+                       max(0.0, self.timeout_s - (time.perf_counter() - t0)))
         names = {0: "OK", 1: "WARN", 2: "ERROR"}
-        return names.get(level[0], f"ERROR {level[1]}"), time.perf_counter() - t0
+        return names.get(level, f"ERROR {text}"), time.perf_counter() - t0
 
     def thrust_at(self, t_s, pos, vel, mass):
-        with self.cond:
-            sched = self.schedule
+        sched = self.client.latest_schedule()
         if sched is None:
             return np.zeros(3)
         stamp, starts, u = sched
@@ -154,9 +98,11 @@ class RosLink:
         return u[k].copy() if 0 <= k < len(u) else np.zeros(3)
 
     def stage_starts(self) -> np.ndarray:
-        with self.cond:
-            sched = self.schedule
+        sched = self.client.latest_schedule()
         return np.zeros(0) if sched is None else sched[0] + np.asarray(sched[1])
+
+    def close(self) -> None:
+        self.client.close()
 
 
 def flight_steps(t0_s: float, N: int, dt_stage: float, substeps: int, replan_every: int,
@@ -375,14 +321,14 @@ def _ros_demo(args, planner, errors, m_open, m0) -> int:
     import rclpy
     from rclpy.signals import SignalHandlerOptions
 
-    from .guidance_node import GuidanceNode, spin_in_thread
+    from .guidance_node import GuidanceNode
+    from .spin import SpinThread
     rclpy.init(signal_handler_options=SignalHandlerOptions.NO)
     guidance = GuidanceNode(scenario=args.case, time_budget_s=args.time_budget,
                             arrival_tolerance_m=args.arrival_tolerance_km * 1e3)
     guidance.adopt_plan(planner.plan)            # the nominal plan, anchored at T0
     link = RosLink(guidance.frame_id, timeout_s=3 * args.time_budget + 30)
-    # one single-threaded executor per node (rclpy's multi-threaded one busy-polls)
-    executors = [spin_in_thread(guidance), spin_in_thread(link.node)]
+    spinner = SpinThread(guidance)
     try:
         if not link.wait_connected():
             print("ROS graph did not connect on loopback", flush=True)
@@ -392,10 +338,9 @@ def _ros_demo(args, planner, errors, m_open, m0) -> int:
                 **_loop_settings(args))
     finally:
         guidance.stop()
-        for ex in executors:
-            ex.shutdown(timeout_sec=2.0)
+        spinner.shutdown(timeout_sec=2.0)
+        link.close()
         guidance.destroy_node()
-        link.node.destroy_node()
         rclpy.try_shutdown()
     s = summarise([r], m_open, m0)
     _print_summary(s)

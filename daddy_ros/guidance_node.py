@@ -36,8 +36,10 @@ from daddy_core.catalogue import list_cases, load_case
 from daddy_core.solver import METHODS
 
 from . import conversions as cv
+from .spin import SpinThread, spin_guarded
 from .planner import FUTURE_TOLERANCE_S, TIME_TOLERANCE_S, GuidancePlanner, InputRejected
 
+NODE_NAME = "daddy_guidance"
 LATCHED = QoSProfile(depth=1, reliability=ReliabilityPolicy.RELIABLE,
                      durability=DurabilityPolicy.TRANSIENT_LOCAL, history=HistoryPolicy.KEEP_LAST)
 RELIABLE = QoSProfile(depth=10, reliability=ReliabilityPolicy.RELIABLE,
@@ -89,7 +91,7 @@ class GuidanceNode(Node):
         """``service_node``: a helper node to host the blocking Trigger service on its own
         executor (``run`` does this); None hosts it here in a reentrant callback group, which
         needs a multi-threaded executor."""
-        super().__init__("daddy_guidance")
+        super().__init__(NODE_NAME)
         for name, (default, text) in PARAMETERS.items():
             self.declare_parameter(name, overrides.get(name, default),
                                    ParameterDescriptor(description=text))
@@ -463,7 +465,7 @@ def run(node_factory, args=None) -> int:
     side = getattr(node, "service_node", None)
     side_executor = None
     if side is not None:
-        side_executor = spin_in_thread(side)
+        side_executor = SpinThread(side)
     def report(exc):
         if hasattr(node, "_diag"):
             node._diag("ERROR", f"internal error in a callback: {exc!r}", {}, None)
@@ -481,49 +483,6 @@ def run(node_factory, args=None) -> int:
             side.destroy_node()
         rclpy.try_shutdown()
     return 0
-
-
-def spin_guarded(executor, stop: threading.Event, on_error=None) -> None:
-    """spin_once until ``stop`` is set or rclpy shuts down. A callback that raises is logged
-    (and passed to ``on_error``) instead of ending the loop: a failing callback must not end
-    guidance."""
-    while not stop.is_set() and rclpy.ok():
-        try:
-            executor.spin_once(timeout_sec=0.05)
-        except Exception as exc:  # noqa: BLE001
-            if stop.is_set() or not rclpy.ok():
-                return
-            rclpy.logging.get_logger("daddy_guidance").error(
-                f"callback raised {type(exc).__name__}: {exc}")
-            if on_error is not None:
-                on_error(exc)
-
-
-class SpinThread:
-    """A node spun by its own single-threaded executor in a daemon thread (in-process use:
-    demo, tests, tools, the service helper). ``shutdown()`` stops and joins the thread before
-    the executor is shut down, so no rclpy call is in flight when nodes are destroyed."""
-
-    def __init__(self, node: Node):
-        self.executor = SingleThreadedExecutor()
-        self.executor.add_node(node)
-        self._stop = threading.Event()
-        self._thread = threading.Thread(target=self._spin, daemon=True,
-                                        name=f"spin_{node.get_name()}")
-        self._thread.start()
-
-    def _spin(self) -> None:
-        spin_guarded(self.executor, self._stop)
-
-    def shutdown(self, timeout_sec: float = 2.0) -> None:
-        self._stop.set()
-        self._thread.join(timeout_sec)
-        self.executor.shutdown(timeout_sec=timeout_sec)
-
-
-def spin_in_thread(node: Node) -> SpinThread:
-    """Spin ``node`` on its own executor thread; ``.shutdown()`` ends it."""
-    return SpinThread(node)
 
 
 def _guidance_with_service_node() -> GuidanceNode:

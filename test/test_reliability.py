@@ -1,11 +1,11 @@
-"""The fault-injection campaign's CI subset (``daddy_reliability --quick``): every category runs
+"""The fault-injection campaign's CI subset (``make reliability QUICK=1``): every category runs
 the same code as ``make reliability`` with smaller counts, and every case must pass."""
 import pytest
 
 pytest.importorskip("rclpy")
 pytest.importorskip("hypothesis")
 
-from daddy_ros import reliability as rel  # noqa: E402
+from reliability import campaign as rel  # noqa: E402
 
 
 @pytest.fixture(scope="module")

@@ -10,16 +10,13 @@ import pytest
 
 rclpy = pytest.importorskip("rclpy")
 
-from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus  # noqa: E402
-from geometry_msgs.msg import InertiaStamped, Vector3Stamped  # noqa: E402
-from nav_msgs.msg import Odometry  # noqa: E402
+from diagnostic_msgs.msg import DiagnosticStatus  # noqa: E402
 from rclpy.executors import MultiThreadedExecutor  # noqa: E402
-from std_msgs.msg import Header  # noqa: E402
 from std_srvs.srv import Trigger  # noqa: E402
-from trajectory_msgs.msg import JointTrajectory  # noqa: E402
 
 from daddy_ros import conversions as cv  # noqa: E402
-from daddy_ros.guidance_node import LATCHED, RELIABLE, GuidanceNode  # noqa: E402
+from daddy_ros.client import GuidanceClient  # noqa: E402
+from daddy_ros.guidance_node import GuidanceNode  # noqa: E402
 from daddy_ros.sim import TruthSim  # noqa: E402
 
 assert os.environ["ROS_AUTOMATIC_DISCOVERY_RANGE"] == "LOCALHOST"
@@ -27,64 +24,13 @@ FRAME = "sun_ecliptic"
 T0 = 1000.0
 
 
-class Client:
-    def __init__(self):
-        self.node = rclpy.create_node("daddy_test_client")
-        self.pub_state = self.node.create_publisher(Odometry, "state_estimate", RELIABLE)
-        self.pub_mass = self.node.create_publisher(InertiaStamped, "mass_estimate", RELIABLE)
-        self.pub_req = self.node.create_publisher(Header, "replan_request", RELIABLE)
-        self.cli = self.node.create_client(Trigger, "/daddy_guidance/replan")
-        self.lock = threading.Condition()
-        self.schedules, self.diags, self.thrust = [], [], []
-        self.node.create_subscription(JointTrajectory, "control_schedule",
-                                      lambda m: self._add(self.schedules, m), LATCHED)
-        self.node.create_subscription(DiagnosticArray, "/diagnostics",
-                                      lambda m: self._add(self.diags, m), RELIABLE)
-        self.node.create_subscription(Vector3Stamped, "thrust_command",
-                                      lambda m: self._add(self.thrust, m), RELIABLE)
-
-    def _add(self, bucket, msg):
-        with self.lock:
-            bucket.append(msg)
-            self.lock.notify_all()
-
-    def wait_for(self, pred, timeout):
-        end = time.monotonic() + timeout
-        with self.lock:
-            while time.monotonic() < end:
-                r = pred()
-                if r:
-                    return r
-                self.lock.wait(0.05)
-        return None
-
-    def diag_for(self, request_id):
-        for m in self.diags:
-            for st in m.status:
-                vals = {kv.key: kv.value for kv in st.values}
-                if vals.get("request_id") == request_id:
-                    return st, vals
-        return None
-
-    def send_state(self, pos, vel, mass, stamp, frame=FRAME):
-        m = InertiaStamped()
-        m.header = Header(stamp=cv.s_to_stamp(stamp), frame_id=frame)
-        m.inertia.m = float(mass)
-        self.pub_mass.publish(m)
-        self.pub_state.publish(cv.state_to_odometry(pos, vel, stamp, frame))
-
-    def request(self, rid, stamp):
-        self.pub_req.publish(Header(stamp=cv.s_to_stamp(stamp), frame_id=rid))
-
-
 @pytest.fixture(scope="module")
 def graph():
     rclpy.init()
     node = GuidanceNode(scenario="earth_mars", frame_id=FRAME, time_budget_s=60.0)
-    client = Client()
-    ex = MultiThreadedExecutor(num_threads=4)
+    client = GuidanceClient(FRAME, name="daddy_test_client")
+    ex = MultiThreadedExecutor(num_threads=4)   # the node hosts its Trigger service itself
     ex.add_node(node)
-    ex.add_node(client.node)
     th = threading.Thread(target=ex.spin, daemon=True)
     th.start()
     # discovery of a late joiner can take a while: poll, never sleep a fixed time
@@ -97,7 +43,7 @@ def graph():
     node.stop()
     ex.shutdown(timeout_sec=2.0)
     node.destroy_node()
-    client.node.destroy_node()
+    client.close()
     rclpy.try_shutdown()
 
 
@@ -109,7 +55,7 @@ def truth_at_start():
 def test_nominal_then_replan_publishes_valid_schedule(graph):
     node, c = graph
     pos, vel, mass = truth_at_start()
-    c.send_state(pos, vel, mass, T0)
+    c.publish_estimate(pos, vel, mass, T0)
     assert c.wait_for(lambda: c.schedules, 15), "no schedule after the first estimate"
     # a perturbed state 5 % into the flight (1000 km, 1 m/s), a warm-started re-optimisation
     sim = TruthSim("earth_mars", t0_s=T0)
@@ -119,12 +65,12 @@ def test_nominal_then_replan_publishes_valid_schedule(graph):
         sim.apply(plan.thrust_n[j], plan.stage_dt_s[j])
     p, v, m = sim.truth_si()
     t = sim.t_s
-    c.send_state(p + [1e6, 0, 0], v + [1.0, 0, 0], m, t)
+    c.publish_estimate(p + [1e6, 0, 0], v + [1.0, 0, 0], m, t)
     c.wait_for(lambda: c.thrust, 10)
     c.request("req-1", t)
-    got = c.wait_for(lambda: c.diag_for("req-1"), 120)
-    assert got, "no diagnostics for req-1"
-    st, vals = got
+    st = c.wait_for(lambda: c.status_for("req-1"), 120)
+    assert st, "no diagnostics for req-1"
+    vals = {kv.key: kv.value for kv in st.values}
     assert st.level == DiagnosticStatus.OK, st.message
     assert st.name.startswith("daddy_guidance")
     for key in ("request_id", "solve_time_s", "max_violation", "final_mass_kg", "method",
@@ -133,7 +79,8 @@ def test_nominal_then_replan_publishes_valid_schedule(graph):
     assert vals["warm_start"] == "yes"
     bound = float(vals["thrust_bound_n"])          # a rung of the margin ladder: 95-100 % of 0.5 N
     assert 0.95 * 0.5 * (1 - 1e-9) <= bound <= 0.5 * (1 + 1e-9)
-    sched = c.wait_for(lambda: [s for s in c.schedules if cv.stamp_to_s(s.header.stamp) >= t - 1e-3], 10)
+    sched = c.wait_for(lambda: [s for _, s in c.schedules
+                                if cv.stamp_to_s(s.header.stamp) >= t - 1e-3], 10)
     assert sched
     starts, u = cv.joint_trajectory_to_schedule(sched[-1])
     assert sched[-1].joint_names == ["thrust_x", "thrust_y", "thrust_z"]
@@ -154,21 +101,21 @@ def test_malformed_estimates_rejected_at_arrival_and_plan_kept(graph, case):
     expect = {"nan": "position", "frame": "frame_id", "negative_mass": "inertia.m",
               "inside_sun": "heliocentric", "unset_stamp": "header.stamp"}[case]
     if case == "nan":
-        c.send_state(pos * math.nan, vel, mass, t)
+        c.publish_estimate(pos * math.nan, vel, mass, t)
     elif case == "frame":
-        c.send_state(pos, vel, mass, t, frame="map")
+        c.publish_estimate(pos, vel, mass, t, frame="map")
     elif case == "negative_mass":
-        c.send_state(pos, vel, -5.0, t)
+        c.publish_estimate(pos, vel, -5.0, t)
     elif case == "inside_sun":
-        c.send_state(pos * 1e-3, vel, mass, t)
+        c.publish_estimate(pos * 1e-3, vel, mass, t)
     elif case == "unset_stamp":
-        c.send_state(pos, vel, mass, 0.0)
-    got = c.wait_for(lambda: [d.status[0] for d in c.diags[n0:] if expect in d.status[0].message],
-                     10)
+        c.publish_estimate(pos, vel, mass, 0.0)
+    got = c.wait_for(lambda: [d.status[0] for _, d in c.diags[n0:]
+                              if expect in d.status[0].message], 10)
     assert got, f"no diagnostic naming {expect!r}"
     assert got[0].level == DiagnosticStatus.ERROR and "rejected" in got[0].message
     assert node.planner.plan is plan_before  # the last valid plan is kept
-    _, u = cv.joint_trajectory_to_schedule(c.schedules[-1])
+    _, u = cv.joint_trajectory_to_schedule(c.schedules[-1][1])
     assert np.all(np.isfinite(u))
 
 
@@ -178,15 +125,14 @@ def test_requests_without_a_usable_estimate_are_rejected(graph, case):
     plan_before = node.planner.plan
     pos, vel, mass = truth_at_start()
     t = plan_before.epoch_s + 10.0
-    c.send_state(pos, vel, mass, t)
-    assert c.wait_for(lambda: [m for m in c.thrust if cv.stamp_to_s(m.header.stamp) >= t - 1e-3],
-                      10)
+    c.publish_estimate(pos, vel, mass, t)
+    assert c.wait_for(lambda: [m for _, m in c.thrust
+                               if cv.stamp_to_s(m.header.stamp) >= t - 1e-3], 10)
     rid = f"bad-{case}"
     # future: the request predates every stored estimate; stale: it is far after the newest
     c.request(rid, 1.0 if case == "future" else t + 10 * node.planner.staleness_s)
-    got = c.wait_for(lambda: c.diag_for(rid), 30)
-    assert got, f"no diagnostics for {rid}"
-    st, _ = got
+    st = c.wait_for(lambda: c.status_for(rid), 30)
+    assert st, f"no diagnostics for {rid}"
     assert st.level == DiagnosticStatus.ERROR and case in st.message, st.message
     assert node.planner.plan is plan_before
 
@@ -197,10 +143,10 @@ def test_trigger_service_answers(graph):
     sim = TruthSim("earth_mars", t0_s=T0)
     p, v, m = sim.truth_si()
     # a valid estimate on the current plan's epoch
-    c.send_state(plan.states_si[0, :3], plan.states_si[0, 3:6], plan.states_si[0, 6], plan.epoch_s)
+    c.publish_estimate(plan.states_si[0, :3], plan.states_si[0, 3:6], plan.states_si[0, 6], plan.epoch_s)
     time.sleep(0.1)
-    assert c.cli.wait_for_service(timeout_sec=10)
-    fut = c.cli.call_async(Trigger.Request())
+    assert c.trigger.wait_for_service(timeout_sec=10)
+    fut = c.trigger.call_async(Trigger.Request())
     end = time.monotonic() + 120
     while not fut.done() and time.monotonic() < end:
         time.sleep(0.05)
@@ -211,7 +157,7 @@ def test_trigger_service_answers(graph):
 def test_triggers_during_a_solve_are_coalesced(graph):
     node, c = graph
     plan = node.planner.plan
-    c.send_state(plan.states_si[0, :3], plan.states_si[0, 3:6], plan.states_si[0, 6], plan.epoch_s)
+    c.publish_estimate(plan.states_si[0, :3], plan.states_si[0, 3:6], plan.states_si[0, 6], plan.epoch_s)
     time.sleep(0.1)
     before_replans, before_coalesced = node.replans, node.coalesced
     for i in range(20):

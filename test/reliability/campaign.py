@@ -1,8 +1,8 @@
 """Fault-injection campaign for the guidance node and the core: bad inputs, load, solver faults,
 process kills and API fuzzing, each counted (cases tried / passed) and summarised in one table.
 
-    daddy_reliability            # the full campaign (make reliability; ~10 min on 2 cores)
-    daddy_reliability --quick    # the CI subset (test/test_reliability.py runs the same code)
+    make reliability             # the full campaign (python -m reliability from test/)
+    make reliability QUICK=1     # the CI subset (test/test_reliability.py runs the same code)
 
 Every ROS category talks to a real guidance node over Fast DDS on loopback: the node runs as a
 separate process (``python -m daddy_ros.guidance_node``) except for the solver faults, which
@@ -122,116 +122,21 @@ class NodeProcess:
         return None if self.proc is None else self.proc.returncode
 
 
-class Client:
-    """The other side of the node's interface: estimates, requests, service and parameter calls
-    out; schedules, thrust commands and diagnostics in, each recorded with its arrival time."""
+def Client():
+    """The campaign's client of the node (``daddy_ros.client.GuidanceClient``)."""
+    from daddy_ros.client import GuidanceClient
+    return GuidanceClient(FRAME, name="daddy_reliability_client")
 
-    def __init__(self):
-        import rclpy
-        from diagnostic_msgs.msg import DiagnosticArray
-        from geometry_msgs.msg import InertiaStamped, Vector3Stamped
-        from nav_msgs.msg import Odometry
-        from rcl_interfaces.srv import GetParameters, SetParameters
-        from std_msgs.msg import Header
-        from std_srvs.srv import Trigger
-        from trajectory_msgs.msg import JointTrajectory
 
-        from . import conversions as cv
-        from .guidance_node import LATCHED, RELIABLE, spin_in_thread
-
-        self.cv, self.Header, self.InertiaStamped = cv, Header, InertiaStamped
-        self.node = rclpy.create_node("daddy_reliability_client")
-        n = self.node
-        self.pub_state = n.create_publisher(Odometry, "state_estimate", RELIABLE)
-        self.pub_mass = n.create_publisher(InertiaStamped, "mass_estimate", RELIABLE)
-        self.pub_req = n.create_publisher(Header, "replan_request", RELIABLE)
-        self.trigger = n.create_client(Trigger, "/daddy_guidance/replan")
-        self.set_params = n.create_client(SetParameters, "/daddy_guidance/set_parameters")
-        self.get_params = n.create_client(GetParameters, "/daddy_guidance/get_parameters")
-        self.cond = threading.Condition()
-        self.schedules, self.diags, self.thrust = [], [], []   # (arrival unix s, msg)
-        n.create_subscription(JointTrajectory, "control_schedule",
-                              lambda m: self._add(self.schedules, m), LATCHED)
-        n.create_subscription(DiagnosticArray, "/diagnostics", lambda m: self._add(self.diags, m),
-                              RELIABLE)
-        n.create_subscription(Vector3Stamped, "thrust_command",
-                              lambda m: self._add(self.thrust, m), RELIABLE)
-        self.executor = spin_in_thread(n)
-
-    def _add(self, bucket, msg):
-        with self.cond:
-            bucket.append((time.time(), msg))
-            self.cond.notify_all()
-
-    def wait_for(self, pred, timeout_s: float):
-        end = time.monotonic() + timeout_s
-        with self.cond:
-            while True:
-                r = pred()
-                if r or time.monotonic() >= end:
-                    return r
-                self.cond.wait(0.02)
-
-    def connected(self, timeout_s: float = 20.0) -> bool:
-        return bool(self.wait_for(lambda: self.pub_state.get_subscription_count() > 0
-                                  and self.pub_mass.get_subscription_count() > 0
-                                  and self.pub_req.get_subscription_count() > 0, timeout_s))
-
-    # --- outputs
-    def send_state(self, pos, vel, stamp_s, frame=FRAME):
-        self.pub_state.publish(self.cv.state_to_odometry(pos, vel, stamp_s, frame))
-
-    def send_estimate(self, pos, vel, mass, stamp_s, timeout_s: float = 5.0) -> bool:
-        """Mass and state of one epoch, then wait until the node has acted on the state (its
-        thrust command for that stamp arrives). True if it did within timeout_s."""
-        self.send_mass(mass, stamp_s)
-        self.send_state(pos, vel, stamp_s)
-        return bool(self.wait_for(lambda: any(self.cv.stamp_to_s(m.header.stamp) >= stamp_s - 1e-3
-                                              for _, m in self.thrust), timeout_s))
-
-    def send_mass(self, mass, stamp_s):
-        m = self.InertiaStamped()
-        m.header = self.Header(stamp=self.cv.s_to_stamp(stamp_s), frame_id=FRAME)
-        m.inertia.m = float(mass)
-        self.pub_mass.publish(m)
-
-    def request(self, rid: str, stamp_s: float):
-        self.pub_req.publish(self.Header(stamp=self.cv.s_to_stamp(stamp_s), frame_id=rid))
-
-    def call(self, client, request, timeout_s: float):
-        """(response or None, latency s) of a service call."""
-        t0 = time.monotonic()
-        if not client.wait_for_service(timeout_sec=timeout_s):
-            return None, time.monotonic() - t0
-        fut = client.call_async(request)
-        end = t0 + timeout_s
-        while not fut.done() and time.monotonic() < end:
-            time.sleep(0.005)
-        return (fut.result() if fut.done() else None), time.monotonic() - t0
-
-    # --- inputs
-    @staticmethod
-    def status(msg):
-        st = msg.status[0]
-        level = st.level[0] if isinstance(st.level, (bytes, bytearray)) else int(st.level)
-        return level, st.message, {kv.key: kv.value for kv in st.values}
-
-    def diag_for(self, rid: str, after: int = 0):
-        with self.cond:
-            for _, m in self.diags[after:]:
-                level, text, vals = self.status(m)
-                if vals.get("request_id") == rid:
-                    return level, text, vals
-        return None
-
-    def close(self):
-        self.executor.shutdown(timeout_sec=2.0)
-        self.node.destroy_node()
+def status(msg) -> tuple[int, str, dict]:
+    """(level, message, values) of a DiagnosticArray's first status."""
+    from daddy_ros.client import status_of
+    return status_of(msg.status[0])
 
 
 def schedule_safe(msg, umax_n: float) -> bool:
     """A schedule is flyable: finite thrust within the bound (solver tolerance) and times."""
-    from . import conversions as cv
+    from daddy_ros import conversions as cv
     starts, u = cv.joint_trajectory_to_schedule(msg)
     return bool(len(u) and np.all(np.isfinite(u)) and np.all(np.isfinite(starts))
                 and np.max(np.linalg.norm(u, axis=1)) <= umax_n * (1 + 1e-3))
@@ -251,8 +156,8 @@ def _ros_session(fn):
 
 def _nominal():
     """(planner holding the nominal plan at T0, truth sim at T0, thrust bound N)."""
-    from .demo import nominal_planner
-    from .sim import Errors, TruthSim
+    from daddy_ros.demo import nominal_planner
+    from daddy_ros.sim import Errors, TruthSim
     planner, _ = nominal_planner(SCENARIO, 60.0)
     sim = TruthSim(SCENARIO, Errors(0, 0, 0, 0), t0_s=T0_S)
     return planner, sim, planner.case.spacecraft.max_thrust_n
@@ -321,6 +226,7 @@ def _bad_estimate_strategy(pos, vel, dry, wet):
 
 def bad_inputs(sizes: Sizes, workdir: Path) -> list[Row]:
     """Generated bad estimates, request timing faults, truncated messages, bad parameters."""
+    from geometry_msgs.msg import InertiaStamped
     from hypothesis import HealthCheck, given, settings
     from nav_msgs.msg import Odometry
     from rcl_interfaces.msg import Parameter as ParameterMsg
@@ -357,7 +263,7 @@ def bad_inputs(sizes: Sizes, workdir: Path) -> list[Row]:
             and math.hypot(m.vector.x, m.vector.y, m.vector.z) <= umax * (1 + 1e-3) for m in thr)
 
     def _generated(client, node, row):
-        cv = client.cv
+        from daddy_ros import conversions as cv
 
         @settings(max_examples=sizes.bad_inputs, database=None, deadline=None,
                   suppress_health_check=list(HealthCheck))
@@ -375,14 +281,14 @@ def bad_inputs(sizes: Sizes, workdir: Path) -> list[Row]:
                 client.pub_state.publish(msg)
             elif kind == "mass":
                 m, stamp = payload
-                msg = client.InertiaStamped()
+                msg = InertiaStamped()
                 msg.header = Header(stamp=cv.s_to_stamp(stamp), frame_id=FRAME)
                 msg.inertia.m = float(m)
                 client.pub_mass.publish(msg)
             else:
                 client.pub_state.publish(Odometry())
-            got = client.wait_for(lambda: [client.status(m) for _, m in client.diags[n0:]
-                                           if "rejected" in client.status(m)[1]], REPLY_TIMEOUT_S)
+            got = client.wait_for(lambda: [status(m) for _, m in client.diags[n0:]
+                                           if "rejected" in status(m)[1]], REPLY_TIMEOUT_S)
             ok = bool(got) and got[0][0] == 2 and expect in got[0][1] and node.alive()
             row.check(ok and no_bad_output(client, t0),
                       f"{kind} expecting {expect!r}: got {got[0][1] if got else 'no diagnostic'}",
@@ -413,8 +319,8 @@ def bad_inputs(sizes: Sizes, workdir: Path) -> list[Row]:
         for cut in (0, 1, 4, 8, 16, 40, len(raw) // 2, len(raw) - 1):
             client.pub_state.publish(raw[:cut])
         client.pub_state.publish(Odometry())
-        client.pub_mass.publish(client.InertiaStamped())
-        got = client.wait_for(lambda: sum("rejected" in client.status(m)[1]
+        client.pub_mass.publish(InertiaStamped())
+        got = client.wait_for(lambda: sum("rejected" in status(m)[1]
                                           for tt, m in client.diags if tt >= t0) >= 2,
                               REPLY_TIMEOUT_S)
         row.check(bool(got) and node.alive(), "empty Odometry/InertiaStamped not diagnosed",
@@ -473,6 +379,8 @@ def load(sizes: Sizes, workdir: Path) -> list[Row]:
     estimates at 50 Hz throughout, Trigger calls and parameter probes in parallel."""
     from rcl_interfaces.srv import GetParameters
     from std_srvs.srv import Trigger
+
+    from daddy_ros import conversions as cv
 
     planner, sim, umax = _nominal()
     rows = [Row(f"load: burst {sizes.burst} req in 1 s"),
@@ -554,7 +462,7 @@ def load(sizes: Sizes, workdir: Path) -> list[Row]:
         w_last = requests[-1][0]
 
         def served():
-            return any(float(client.status(m)[2].get("solve_start_unix_s", 0)) >= w_last
+            return any(float(status(m)[2].get("solve_start_unix_s", 0)) >= w_last
                        for _, m in client.diags)
         done = client.wait_for(served, 120.0)
         stop.set()
@@ -566,13 +474,13 @@ def load(sizes: Sizes, workdir: Path) -> list[Row]:
 
     def _judge(client, node, published, requests, probes, triggers, rss):
         with client.cond:
-            solves = [(t, client.status(m)) for t, m in client.diags]
+            solves = [(t, status(m)) for t, m in client.diags]
             schedules = [(t, m) for t, m in client.schedules]
         solves = [(t, s) for t, s in solves if "solve_start_unix_s" in s[2]]
         starts = np.array([float(s[2]["solve_start_unix_s"]) for _, s in solves])
         pub_w = np.array([w for w, _ in published])
         pub_s = np.array([s for _, s in published])
-        sched_stamps = [client.cv.stamp_to_s(m.header.stamp) for _, m in schedules]
+        sched_stamps = [cv.stamp_to_s(m.header.stamp) for _, m in schedules]
         fresh = {}
         new_plans = superseded = 0
         for _, (level, text, vals) in solves:
@@ -630,7 +538,8 @@ def solver_faults(sizes: Sizes, workdir: Path) -> list[Row]:
     last valid schedule stays published, diagnostics say why, the next request works."""
     from rclpy.parameter import Parameter
 
-    from .guidance_node import GuidanceNode, spin_in_thread
+    from daddy_ros.guidance_node import GuidanceNode
+    from daddy_ros.spin import SpinThread
 
     planner0, sim, umax = _nominal()
     row = Row("solver faults")
@@ -650,7 +559,7 @@ def solver_faults(sizes: Sizes, workdir: Path) -> list[Row]:
     def session():
         client = Client()
         node = GuidanceNode(scenario=SCENARIO, frame_id=FRAME, time_budget_s=60.0)
-        ex = spin_in_thread(node)
+        ex = SpinThread(node)
         try:
             if not client.connected():
                 raise RuntimeError("in-process guidance node not discovered")
@@ -729,8 +638,8 @@ def solver_faults(sizes: Sizes, workdir: Path) -> list[Row]:
 def process_faults(sizes: Sizes, workdir: Path, progress=None) -> list[Row]:
     """Kill -9 the node mid-transfer and restart it with the same persist_file: it restores the
     persisted plan, re-plans at the first estimate, and the closed-loop demo reaches the target."""
-    from .demo import RosLink, fly
-    from .sim import Errors, TruthSim
+    from daddy_ros.demo import RosLink, fly
+    from daddy_ros.sim import Errors, TruthSim
 
     planner, _, _ = _nominal()
     row = Row("process: kill -9 and restart")
@@ -739,10 +648,9 @@ def process_faults(sizes: Sizes, workdir: Path, progress=None) -> list[Row]:
     m_open = float(planner.plan.states_si[-1, 6])
 
     def session():
-        from .guidance_node import spin_in_thread
         node = NodeProcess(workdir, persist_file=str(persist)).start()
         link = RosLink(FRAME, timeout_s=120.0)
-        ex = spin_in_thread(link.node)
+        c = link.client
         sim = TruthSim(SCENARIO, Errors(0, 0, 0, 0), t0_s=T0_S)
         count = {"replans": 0, "kills": 0}
         kill_at = {2 + 2 * k for k in range(sizes.kills)}
@@ -754,12 +662,11 @@ def process_faults(sizes: Sizes, workdir: Path, progress=None) -> list[Row]:
             if count["replans"] in kill_at:
                 t0 = time.time()
                 node.kill()
-                with link.cond:
-                    n_sched = link.n_schedules
+                with c.cond:
+                    n_sched = len(c.schedules)
                 node = NodeProcess(workdir, persist_file=str(persist)).start()
                 # the restarted node publishes the restored plan (latched) once discovered
-                with link.cond:
-                    back = link.cond.wait_for(lambda: link.n_schedules > n_sched, 60.0)
+                back = c.wait_for(lambda: len(c.schedules) > n_sched, 60.0)
                 count["kills"] += 1
                 row.check(bool(back) and node.alive(), "restarted node published no plan",
                           time.time() - t0)
@@ -776,8 +683,7 @@ def process_faults(sizes: Sizes, workdir: Path, progress=None) -> list[Row]:
             r = fly(link, sim, planner, replan_every=5, substeps=2, final_stages=2,
                     progress=progress)
         finally:
-            ex.shutdown(timeout_sec=2.0)
-            link.node.destroy_node()
+            link.close()
             node.stop()
         ok = (r["miss_km"] <= 1.0 and r["miss_cm_s"] <= 1.0
               and abs(r["final_mass_kg"] - m_open) <= 0.01 * (planner.case.spacecraft.wet_mass_kg
@@ -911,7 +817,7 @@ def run_campaign(sizes: Sizes, only=None, workdir: Path | None = None, progress=
 
 
 def main(argv=None) -> int:
-    ap = argparse.ArgumentParser(prog="daddy_reliability", description=__doc__.splitlines()[0])
+    ap = argparse.ArgumentParser(prog="python -m reliability", description=__doc__.splitlines()[0])
     ap.add_argument("--quick", action="store_true", help="the CI subset")
     ap.add_argument("--only", nargs="*", choices=list(CATEGORIES), help="categories to run")
     args = ap.parse_args(argv)
