@@ -14,8 +14,9 @@ import time
 
 import numpy as np
 
-from daddy_ros.demo import PLANS_DIR, T0_S, nominal_planner
-from daddy_ros.sim import Errors, TruthSim
+from daddy_ros.config import PLANS_DIR
+from daddy_ros.demo import nominal_planner
+from daddy_ros.sim import T0_S, Errors, TruthSim
 
 PERTURB = {"earth_mars": (1e6, 1.0), "halo_l2_l1": (1e4, 1e-2)}
 PEER_MS = {"earth_mars": 68.0, "halo_l2_l1": 146.0}   # CasADi + IPOPT warm-started (issue #4)
@@ -54,7 +55,7 @@ def main():
         for i in range(args.trials):
             for restore in warm:
                 planner, _ = nominal_planner(case, 600.0)
-                planner.replan_options = planner.replan_options.with_(restore_warm_start=restore)
+                planner.policy = planner.policy.with_warm(restore_warm_start=restore)
                 p, v, m, t = perturbed_state(case, planner, np.random.default_rng(i), dr, dv)
                 out = planner.replan(p, v, m, t, f"w{i}", now_s=t)
                 warm[restore].append(out.solve_time_s * 1e3)

@@ -19,11 +19,10 @@ from pathlib import Path
 
 import numpy as np
 
-from .planner import GuidancePlanner, InputRejected
-from .sim import Errors, TruthSim
-
-T0_S = 1000.0  # mission clock at departure [s]; any positive epoch works
-PLANS_DIR = Path(__file__).with_name("plans")
+from .checks import InputRejected
+from .config import bundled_plan
+from .planner import GuidancePlanner
+from .sim import T0_S, Errors, TruthSim
 
 
 class DirectLink:
@@ -141,8 +140,7 @@ class DeviationMonitor:
         self.x = None   # normalised predicted state
 
     def reset(self, pos, vel, mass) -> None:
-        u = self.sim.units
-        self.x = np.concatenate([u.length(pos), u.speed(vel), [u.mass(mass)]])
+        self.x = self.sim.units.states_normalised(np.concatenate([pos, vel, [mass]]))
 
     def advance(self, thrust_n, dt_s: float) -> None:
         if self.x is not None:
@@ -150,9 +148,8 @@ class DeviationMonitor:
 
     def drift(self, pos, vel) -> tuple[float, float]:
         """(position m, velocity m/s) of the estimate from the prediction."""
-        u = self.sim.units
-        return (float(np.linalg.norm(pos - u.length_m(self.x[:3]))),
-                float(np.linalg.norm(vel - u.speed_m_s(self.x[3:6]))))
+        x = self.sim.units.states_si(self.x)
+        return float(np.linalg.norm(pos - x[:3])), float(np.linalg.norm(vel - x[3:6]))
 
     def due(self, pos, vel) -> bool:
         if self.x is None or not (self.max_pos_m or self.max_vel_m_s):
@@ -215,9 +212,9 @@ def nominal_planner(case: str, time_budget_s: float,
     """A planner holding the open-loop optimum at T0 (bundled plan or a cold solve)."""
     planner = GuidancePlanner(case, time_budget_s=time_budget_s,
                               arrival_tolerance_m=arrival_tolerance_m)
-    plan_file = PLANS_DIR / f"{case}_fuel.json"
+    plan_file = bundled_plan(case)
     sim = TruthSim(case, t0_s=T0_S)
-    if plan_file.exists():
+    if plan_file is not None:
         plan = planner.load_plan(plan_file, T0_S)
     else:
         p, v, m = sim.truth_si()

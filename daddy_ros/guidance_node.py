@@ -31,13 +31,15 @@ from std_msgs.msg import Header
 from std_srvs.srv import Trigger
 from trajectory_msgs.msg import JointTrajectory
 
-from daddy_core.errors import DaddyError
 from daddy_core.catalogue import list_cases, load_case
-from daddy_core.solver import METHODS
+from daddy_core.errors import DaddyError
 
 from . import conversions as cv
+from .checks import FUTURE_TOLERANCE_S, InputRejected
+from .config import NodeConfig, PlannerConfig, bundled_plan, parameters
+from .plan import TIME_TOLERANCE_S
+from .planner import GuidancePlanner
 from .spin import SpinThread, spin_guarded
-from .planner import FUTURE_TOLERANCE_S, TIME_TOLERANCE_S, GuidancePlanner, InputRejected
 
 NODE_NAME = "daddy_guidance"
 LATCHED = QoSProfile(depth=1, reliability=ReliabilityPolicy.RELIABLE,
@@ -45,41 +47,8 @@ LATCHED = QoSProfile(depth=1, reliability=ReliabilityPolicy.RELIABLE,
 RELIABLE = QoSProfile(depth=10, reliability=ReliabilityPolicy.RELIABLE,
                       history=HistoryPolicy.KEEP_LAST)
 
-PARAMETERS = {  # name: (default, description)
-    "scenario": ("halo_l2_l1", "catalogue case name or path to a case .json file"),
-    "method": ("dyn", f"DDP method, one of {', '.join(METHODS)}"),
-    "polish": (True, "Newton polishing after each re-optimisation"),
-    "fuel_optimal": (True, "fuel-optimal cost (else energy-optimal)"),
-    "stages": (0, "stage count of the scenario (0: the case's own)"),
-    "tol_aul": (0.0, "augmented-Lagrangian tolerance (0: the case's own for cold solves, 1e-5 "
-                     "for polished warm re-optimisations, which Newton then takes to tol_newton)"),
-    "tol_newton": (0.0, "Newton polishing tolerance (0: the case's own)"),
-    "time_budget_s": (60.0, "wall-clock budget of one re-optimisation [s]"),
-    "restore_first": (True, "restore feasibility of the warm start by Newton before DDP, so a "
-                            "re-optimisation stopped by its budget still yields a feasible plan "
-                            "(and faster: bench re-plans Earth-Mars 45 / halo 96 ms, without it "
-                            "64 / 292 ms)"),
-    "arrival_tolerance_m": (0.0, "in the arrival phase (the last re-gridded stages) the terminal "
-                                 "position may be this far from the target, the velocity stays "
-                                 "exact [m]; 0: position exact too"),
-    "thrust_margin": (0.05, "fraction of the thrust rating plans hold back for closed-loop "
-                            "corrections; a re-optimisation gives it up in steps (with 0.05: 95, "
-                            "97, 98.5, 100 % of the rating) only when the target is out of reach "
-                            "otherwise; 0: the full rating"),
-    "staleness_s": (600.0, "estimates older than this relative to the request are rejected [s]"),
-    "frame_id": ("earth_moon_rotating", "frame of state estimates and thrust"),
-    "plan_file": ("", "nominal plan (solution JSON) adopted at the first estimate; empty: the "
-                      "bundled nominal of the scenario if any, else a cold solve on request"),
-    "persist_file": ("", "the current plan is written here after every new plan and restored "
-                         "from here at start-up (crash recovery); empty: no persistence"),
-    "state_topic": ("state_estimate", "nav_msgs/Odometry input"),
-    "mass_topic": ("mass_estimate", "geometry_msgs/InertiaStamped input (kg)"),
-    "request_topic": ("replan_request", "std_msgs/Header input: frame_id = request id"),
-    "schedule_topic": ("control_schedule", "trajectory_msgs/JointTrajectory output (N)"),
-    "thrust_topic": ("thrust_command", "geometry_msgs/Vector3Stamped output (N)"),
-    "path_topic": ("planned_path", "nav_msgs/Path output (m)"),
-}
-PLANS_DIR = Path(__file__).with_name("plans")
+NAMES = {p.name for p in parameters()}
+RUNTIME = {p.name for p in parameters() if p.runtime}   # time_budget_s, staleness_s
 STATE_HISTORY = 64   # accepted estimates kept to serve requests stamped in their past
 # a request stamped after the newest estimate waits this long for the estimate of its time
 # (topics are not ordered with each other: a request can overtake the estimate sent before it)
@@ -92,19 +61,16 @@ class GuidanceNode(Node):
         executor (``run`` does this); None hosts it here in a reentrant callback group, which
         needs a multi-threaded executor."""
         super().__init__(NODE_NAME)
-        for name, (default, text) in PARAMETERS.items():
-            self.declare_parameter(name, overrides.get(name, default),
-                                   ParameterDescriptor(description=text))
+        for p in parameters():
+            self.declare_parameter(p.name, overrides.get(p.name, p.default),
+                                   ParameterDescriptor(description=p.description))
         self.add_on_set_parameters_callback(self._on_set_parameters)
         g = lambda n: self.get_parameter(n).value  # noqa: E731
-        self.frame_id = g("frame_id")
-        self.planner = GuidancePlanner(
-            scenario=g("scenario"), method=g("method"), polish=g("polish"),
-            fuel_optimal=g("fuel_optimal"), stages=g("stages"), time_budget_s=g("time_budget_s"),
-            staleness_s=g("staleness_s"), tol_aul=g("tol_aul") or None,
-            tol_newton=g("tol_newton") or None, restore_first=g("restore_first"),
-            arrival_tolerance_m=g("arrival_tolerance_m"), thrust_margin=g("thrust_margin"))
-        self.plan_file = g("plan_file") or self._bundled_plan()
+        self.planner = GuidancePlanner(config=PlannerConfig(
+            **{f: g(f) for f in PlannerConfig.__dataclass_fields__ if self.has_parameter(f)}))
+        cfg = NodeConfig(**{f: g(f) for f in NodeConfig.__dataclass_fields__})
+        self.frame_id = cfg.frame_id
+        self.plan_file = cfg.plan_file or self._bundled_plan()
         self._lock = threading.Lock()
         self._wake = threading.Condition(self._lock)
         self._states = deque(maxlen=STATE_HISTORY)   # accepted (pos, vel, stamp), arrival order
@@ -117,24 +83,24 @@ class GuidanceNode(Node):
         self._stop = False
         self.replans = 0
         self.coalesced = 0
-        self.persist_file = g("persist_file")
+        self.persist_file = cfg.persist_file
         self._replan_on_first_estimate = False
 
         sub_group = MutuallyExclusiveCallbackGroup()
-        self.create_subscription(Odometry, g("state_topic"), self._on_state,
+        self.create_subscription(Odometry, cfg.state_topic, self._on_state,
                                  qos_profile_sensor_data, callback_group=sub_group)
-        self.create_subscription(InertiaStamped, g("mass_topic"), self._on_mass,
+        self.create_subscription(InertiaStamped, cfg.mass_topic, self._on_mass,
                                  qos_profile_sensor_data, callback_group=sub_group)
         # requests in their own group: a request flood must not delay the estimates
-        self.create_subscription(Header, g("request_topic"), self._on_request, RELIABLE,
+        self.create_subscription(Header, cfg.request_topic, self._on_request, RELIABLE,
                                  callback_group=MutuallyExclusiveCallbackGroup())
         self.service_node = service_node
         (service_node or self).create_service(Trigger, self.resolve_service_name("~/replan"),
                                               self._on_service,
                                               callback_group=ReentrantCallbackGroup())
-        self.pub_schedule = self.create_publisher(JointTrajectory, g("schedule_topic"), LATCHED)
-        self.pub_path = self.create_publisher(PathMsg, g("path_topic"), LATCHED)
-        self.pub_thrust = self.create_publisher(Vector3Stamped, g("thrust_topic"), RELIABLE)
+        self.pub_schedule = self.create_publisher(JointTrajectory, cfg.schedule_topic, LATCHED)
+        self.pub_path = self.create_publisher(PathMsg, cfg.path_topic, LATCHED)
+        self.pub_thrust = self.create_publisher(Vector3Stamped, cfg.thrust_topic, RELIABLE)
         self.pub_diag = self.create_publisher(DiagnosticArray, "/diagnostics", RELIABLE)
         self._worker = threading.Thread(target=self._work, name="daddy_replan", daemon=True)
         self._worker.start()
@@ -145,28 +111,22 @@ class GuidanceNode(Node):
 
     # ------------------------------------------------------------------ parameters
     def _bundled_plan(self) -> str:
-        kind = "fuel" if self.planner.fuel_optimal else "energy"
-        p = PLANS_DIR / f"{self.planner.case.name}_{kind}.json"
-        return str(p) if p.exists() and not self.get_parameter("stages").value else ""
+        p = bundled_plan(self.planner.case.name, self.planner.config.fuel_optimal)
+        return str(p) if p is not None and not self.planner.config.stages else ""
 
     def _on_set_parameters(self, params):
-        """Runtime updates: time_budget_s and staleness_s (positive finite floats); every other
-        declared parameter is read-only after start-up. A rejected update changes nothing."""
+        """Runtime updates: the ``runtime`` parameters of ``config`` (time_budget_s and
+        staleness_s, positive finite floats); every other declared parameter is read-only after
+        start-up. A rejected update changes nothing."""
         why = next((r for r in map(self._parameter_problem, params) if r), None)
         if why:
             self._diag("WARN", f"parameter update rejected: {why}", {"field": "parameters"}, None)
             return SetParametersResult(successful=False, reason=why)
-        for p in params:
-            if p.name == "time_budget_s":
-                self.planner.time_budget_s = p.value
-                self.planner.options = self.planner.options.with_(time_budget_s=p.value)
-                self.planner.replan_options = self.planner.replan_options.with_(time_budget_s=p.value)
-            elif p.name == "staleness_s":
-                self.planner.staleness_s = p.value
+        self.planner.update(**{p.name: p.value for p in params if p.name in RUNTIME})
         return SetParametersResult(successful=True)
 
     def _parameter_problem(self, p) -> str:
-        if p.name in ("time_budget_s", "staleness_s"):
+        if p.name in RUNTIME:
             if not (isinstance(p.value, float) and math.isfinite(p.value) and p.value > 0):
                 return f"{p.name} must be a positive finite float, got {p.value!r}"
             return ""
@@ -176,7 +136,7 @@ class GuidanceNode(Node):
             except DaddyError:
                 return (f"scenario {p.value!r} is unknown (known: {', '.join(list_cases())}); "
                         "scenario is also read-only after start-up")
-        if p.name in PARAMETERS and self.has_parameter(p.name):
+        if p.name in NAMES and self.has_parameter(p.name):
             return f"{p.name} is read-only after start-up"
         return ""
 
@@ -193,7 +153,7 @@ class GuidanceNode(Node):
                          f"{self.frame_id!r}", stamp)
             return
         try:
-            self.planner.check_estimate(pos, vel, stamp)
+            self.planner.checks.check_estimate(pos, vel, stamp)
         except InputRejected as exc:
             self._reject("state_estimate", str(exc), stamp)
             return
@@ -208,7 +168,7 @@ class GuidanceNode(Node):
     def _on_mass(self, msg: InertiaStamped):
         mass, stamp = float(msg.inertia.m), cv.stamp_to_s(msg.header.stamp)
         try:
-            self.planner.check_mass(mass, stamp)
+            self.planner.checks.check_mass(mass, stamp)
         except InputRejected as exc:
             self._reject("mass_estimate", str(exc), stamp)
             return

@@ -7,8 +7,10 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from daddy_core.integrators import rk78
 from daddy_core.catalogue import load_case
+from daddy_core.integrators import rk78
+
+T0_S = 1000.0  # the demo's mission clock at departure [s]; any positive epoch works
 
 
 @dataclass(frozen=True)
@@ -39,8 +41,9 @@ class TruthSim:
         return self.case.tof * self.units.tu_s
 
     def truth_si(self):
-        u = self.units
-        return u.length_m(self.x[:3]), u.speed_m_s(self.x[3:6]), float(u.mass_kg(self.x[6]))
+        """(position m, velocity m/s, mass kg) of the truth."""
+        x = self.units.states_si(self.x)
+        return x[:3], x[3:6], float(x[6])
 
     def estimate_si(self):
         """A navigation estimate: truth + Gaussian errors (position m, velocity m/s, mass kg)."""
@@ -76,7 +79,5 @@ class TruthSim:
 
     def miss(self):
         """(position miss m, velocity miss m/s) with respect to the case target."""
-        u = self.units
-        xt = self.case.x_target
-        return (float(np.linalg.norm(u.length_m(self.x[:3] - xt[:3]))),
-                float(np.linalg.norm(u.speed_m_s(self.x[3:6] - xt[3:6]))))
+        d = self.units.states_si(self.x - self.case.x_target)
+        return float(np.linalg.norm(d[:3])), float(np.linalg.norm(d[3:6]))

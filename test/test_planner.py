@@ -6,10 +6,12 @@ import numpy as np
 import pytest
 
 from daddy_core.errors import DaddyError
-from daddy_ros.demo import PLANS_DIR, T0_S, DeviationMonitor, flight_steps
-from daddy_ros.sim import Errors, TruthSim
-from daddy_ros.planner import (ARRIVAL_SPEED_SCALE_M_S, MIN_STAGE_FRACTION, MIN_STAGES_LEFT,
-                               GuidancePlanner, InputRejected)
+from daddy_ros.checks import InputRejected
+from daddy_ros.config import PLANS_DIR
+from daddy_ros.demo import DeviationMonitor, flight_steps
+from daddy_ros.planner import GuidancePlanner
+from daddy_ros.shift import ARRIVAL_SPEED_SCALE_M_S, MIN_STAGE_FRACTION, MIN_STAGES_LEFT
+from daddy_ros.sim import T0_S, Errors, TruthSim
 
 
 @pytest.fixture(scope="module")
@@ -26,8 +28,10 @@ def test_shift_drops_executed_stages_and_keeps_time_to_go(planner):
     tu = planner.units.tu_s
     # 2.5 stages flown: two stages dropped, the current (third) one shortened
     t = plan.epoch_s + dt[0] + dt[1] + 0.5 * dt[2]
-    prob, U, duals, maps = planner.shifted_problem(plan, t, x0)
-    assert prob.N == len(dt) - 2
+    s = planner.shift(plan, t, x0)
+    prob, U, duals, maps = s.problem, s.start.U, s.start.duals, s.start.maps
+    assert prob.N == len(dt) - 2 and not s.arrival
+    assert s.start.rho == plan.solution.rho
     assert prob.stage_dt[0] * tu == pytest.approx(0.5 * dt[2])
     assert np.sum(prob.stage_dt) * tu == pytest.approx(plan.end_s - t)
     np.testing.assert_array_equal(U, plan.solution.U[2:])
@@ -36,17 +40,21 @@ def test_shift_drops_executed_stages_and_keeps_time_to_go(planner):
     # stage's map is not used
     assert maps.N == prob.N and maps.radius[0] == 0
     np.testing.assert_array_equal(maps.radius[1:], plan.solution.stage_maps.radius[3:])
-    _, _, _, at_boundary = planner.shifted_problem(plan, plan.epoch_s + dt[0] + dt[1], x0)
+    at_boundary = planner.shift(plan, plan.epoch_s + dt[0] + dt[1], x0).start.maps
     assert at_boundary.N == len(dt) - 2 and at_boundary.radius[0] > 0
     # a first stage shorter than MIN_STAGE_FRACTION is merged into the next one
     t = plan.epoch_s + dt[0] - 0.5 * MIN_STAGE_FRACTION * dt[1]
-    prob, U, _, maps = planner.shifted_problem(plan, t, x0)
+    s = planner.shift(plan, t, x0)
+    prob, U, maps = s.problem, s.start.U, s.start.maps
     assert prob.N == len(dt) - 1
     assert prob.stage_dt[0] * tu == pytest.approx(dt[1] + 0.5 * MIN_STAGE_FRACTION * dt[1])
     np.testing.assert_array_equal(U, plan.solution.U[1:])   # the merged stage flies stage 1's
     assert maps.N == prob.N and maps.radius[0] == 0
     with pytest.raises(InputRejected, match="ended"):
-        planner.shifted_problem(plan, plan.end_s + 1.0, x0)
+        planner.shift(plan, plan.end_s + 1.0, x0)
+    cold = planner.shift(None, t, x0)   # no plan: the whole transfer from x0, no warm start
+    assert cold.start is None and cold.problem.N == len(dt)
+    np.testing.assert_array_equal(cold.problem.x0, x0)
 
 
 def test_shift_regrids_the_last_stages(planner):
@@ -56,15 +64,17 @@ def test_shift_regrids_the_last_stages(planner):
     tu = planner.units.tu_s
     # half of the last stage left: re-gridded into MIN_STAGES_LEFT equal stages flying its thrust
     t = plan.end_s - 0.5 * dt[-1]
-    prob, U, duals, maps = planner.shifted_problem(plan, t, x0)
-    assert prob.N == MIN_STAGES_LEFT
+    s = planner.shift(plan, t, x0)
+    prob, U, duals, maps = s.problem, s.start.U, s.start.duals, s.start.maps
+    assert prob.N == MIN_STAGES_LEFT and s.arrival
     np.testing.assert_allclose(prob.stage_dt * tu, np.full(MIN_STAGES_LEFT, 0.5 * dt[-1] / MIN_STAGES_LEFT))
     np.testing.assert_array_equal(U, np.tile(plan.solution.U[-1], (MIN_STAGES_LEFT, 1)))
     assert maps is None   # a new grid: no maps
     assert duals["lam"].shape[1] == MIN_STAGES_LEFT
     # two stages left: each new stage takes the control of the old stage holding its midpoint
     t = plan.end_s - dt[-2] - dt[-1]
-    prob, U, _, maps = planner.shifted_problem(plan, t, x0)
+    s = planner.shift(plan, t, x0)
+    prob, U = s.problem, s.start.U
     assert np.sum(prob.stage_dt) * tu == pytest.approx(dt[-2] + dt[-1])
     np.testing.assert_array_equal(U, plan.solution.U[[-2, -2, -1, -1]])
 
@@ -73,9 +83,9 @@ def test_arrival_phase_targets_velocity_and_a_position_ball():
     pl = GuidancePlanner("earth_mars", arrival_tolerance_m=300e3)
     plan = pl.load_plan(PLANS_DIR / "earth_mars_fuel.json", T0_S)
     x0 = plan.solution.X[0]
-    mid, _, _, _ = pl.shifted_problem(plan, plan.epoch_s + plan.stage_dt_s[0], x0)
+    mid = pl.shift(plan, plan.epoch_s + plan.stage_dt_s[0], x0).problem
     assert mid.terminal_constraints(mid.x_target)[0].shape == (6,)   # not yet: exact target
-    prob, _, _, _ = pl.shifted_problem(plan, plan.end_s - 0.5 * plan.stage_dt_s[-1], x0)
+    prob = pl.shift(plan, plan.end_s - 0.5 * plan.stage_dt_s[-1], x0).problem
     xt = prob.x_target
     g, n_ineq = prob.terminal_constraints(xt)
     s = pl.units.speed(ARRIVAL_SPEED_SCALE_M_S)      # 1 cm/s: the weight of one tolerance
@@ -86,9 +96,9 @@ def test_arrival_phase_targets_velocity_and_a_position_ball():
     off[0] += 2 * R                                   # twice the tolerance: violated by one
     assert prob.terminal_constraints(off)[0][0] == pytest.approx(s, rel=1e-6)
     off[0] = xt[0] + 0.5 * R                          # inside the ball: no miss
-    assert pl._miss(prob, np.array([off])) == 0.0
+    assert prob.terminal_violation(off) == 0.0
     off[4] += 1e-3                                    # the velocity stays exact
-    assert pl._miss(prob, np.array([off])) == pytest.approx(1e-3)
+    assert prob.terminal_violation(off) == pytest.approx(1e-3)
     with pytest.raises(DaddyError, match="arrival_tolerance_m"):
         GuidancePlanner("earth_mars", arrival_tolerance_m=-1.0)
 
@@ -159,7 +169,7 @@ def test_check_state_names_the_field(planner, pos_scale, vel_nan, mass, stamp, n
     X = planner.plan.states_si
     vel = X[0, 3:6] * (np.nan if vel_nan else 1.0)
     with pytest.raises(InputRejected, match=field):
-        planner.check_state(X[0, :3] * pos_scale, vel, mass, stamp, now)
+        planner.checks.check_state(X[0, :3] * pos_scale, vel, mass, stamp, now)
 
 
 def test_persistence_round_trip_and_bad_files(planner, tmp_path):
@@ -208,13 +218,13 @@ def test_warm_replans_loosen_the_aul_tolerance_except_in_the_arrival_phase(monke
     fresh expansions, an explicit tol_aul applies throughout, and without polishing nothing
     changes."""
     import daddy_ros.planner as planner_mod
-    from daddy_ros.planner import WARM_ACTIVE_TOL, WARM_TOL_AUL
+    from daddy_ros.replan_policy import WARM_ACTIVE_TOL, WARM_TOL_AUL
     pl = GuidancePlanner("earth_mars")
-    case_tol, case_active = pl.options.tol_aul, pl.options.newton_active_tol
-    assert case_tol < WARM_TOL_AUL and pl.replan_options.tol_aul == WARM_TOL_AUL
-    assert case_active < WARM_ACTIVE_TOL == pl.replan_options.newton_active_tol
-    assert GuidancePlanner("earth_mars", tol_aul=2e-6).replan_options.tol_aul == 2e-6
-    assert GuidancePlanner("earth_mars", polish=False).replan_options.tol_aul == case_tol
+    case_tol, case_active = pl.policy.cold.tol_aul, pl.policy.cold.newton_active_tol
+    assert case_tol < WARM_TOL_AUL and pl.policy.warm.tol_aul == WARM_TOL_AUL
+    assert case_active < WARM_ACTIVE_TOL == pl.policy.warm.newton_active_tol
+    assert GuidancePlanner("earth_mars", tol_aul=2e-6).policy.warm.tol_aul == 2e-6
+    assert GuidancePlanner("earth_mars", polish=False).policy.warm.tol_aul == case_tol
     seen = []
     real_solve = planner_mod.solve
 
@@ -250,7 +260,7 @@ def test_warm_replan_from_a_restored_start_can_skip_a_negligible_ddp_step():
     pos, vel = s[:3] + np.array([6e5, -8e5, 0.0]), s[3:6] + np.array([0.6, 0.8, 0.0])
     masses = {}
     for stop in (True, False):
-        pl.replan_options = pl.replan_options.with_(ddp_stop_on_prediction=stop)
+        pl.policy = pl.policy.with_warm(ddp_stop_on_prediction=stop)
         pl.set_plan(plan)
         out = pl.replan(pos, vel, s[6], t, f"stop={stop}", now_s=t)
         assert out.ok and out.level == "OK", out.reason
@@ -290,3 +300,21 @@ def test_demo_plot_is_a_png_of_flown_and_planned(planner, tmp_path):
     plot_closed_loop(r, plan, path)
     data = path.read_bytes()
     assert data[:8] == b"\x89PNG\r\n\x1a\n" and len(data) > 20_000
+
+
+def test_config_yaml_lists_every_node_parameter_with_its_default():
+    """config/guidance.yaml, the node's declarations and the planner's defaults all come from
+    daddy_ros.config: the file lists exactly the declared parameters, each at its default."""
+    yaml = pytest.importorskip("yaml")
+    from pathlib import Path
+
+    from daddy_ros.config import PlannerConfig, parameters
+    path = Path(__file__).parents[1] / "config" / "guidance.yaml"
+    listed = yaml.safe_load(path.read_text())["daddy_guidance"]["ros__parameters"]
+    declared = {p.name: p.default for p in parameters()}
+    assert listed == declared
+    assert all(type(listed[k]) is type(v) for k, v in declared.items())   # 0.0 stays a float
+    assert {p.name for p in parameters() if p.runtime} == {"time_budget_s", "staleness_s"}
+    pl = GuidancePlanner()
+    assert pl.config == PlannerConfig() and pl.case.name == declared["scenario"]
+    assert pl.time_budget_s == declared["time_budget_s"]

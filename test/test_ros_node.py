@@ -130,7 +130,7 @@ def test_requests_without_a_usable_estimate_are_rejected(graph, case):
                                if cv.stamp_to_s(m.header.stamp) >= t - 1e-3], 10)
     rid = f"bad-{case}"
     # future: the request predates every stored estimate; stale: it is far after the newest
-    c.request(rid, 1.0 if case == "future" else t + 10 * node.planner.staleness_s)
+    c.request(rid, 1.0 if case == "future" else t + 10 * node.planner.config.staleness_s)
     st = c.wait_for(lambda: c.status_for(rid), 30)
     assert st, f"no diagnostics for {rid}"
     assert st.level == DiagnosticStatus.ERROR and case in st.message, st.message

@@ -27,7 +27,7 @@ import numpy as np
 
 SCENARIO = "earth_mars"
 FRAME = "sun_ecliptic"
-T0_S = 1000.0
+T0_S = 1000.0   # the mission clock at departure [s] (daddy_ros.sim.T0_S, the demo's)
 DELIVERY_S = 0.1        # loopback delivery allowance when judging "newest state at solve start"
 MAX_SUPERSEDED = 0.05   # share of new schedules a subscriber may miss under load (latched depth 1)
 REPLY_TIMEOUT_S = 5.0   # one bad input must be diagnosed within this
@@ -573,13 +573,13 @@ def solver_faults(sizes: Sizes, workdir: Path) -> list[Row]:
     def _inject(client, node):
         pl = node.planner
         # every rung of the thrust-margin ladder derives its problem from base_problem
-        base, ropts = pl.base_problem, pl.replan_options
+        base, policy = pl.base_problem, pl.policy
         pos, vel, mass = sim.truth_si()
         t = sim.t_s
         if not _good_request(client, "warm-up", pos, vel, mass, t):
             raise RuntimeError("no OK answer before injecting faults")
         faults = {
-            "no convergence": lambda: setattr(pl, "replan_options", ropts.with_(
+            "no convergence": lambda: setattr(pl, "policy", policy.with_warm(
                 ddp_max_iter=1, aul_max_iter=1, newton_max_iter=1)),
             "time budget": lambda: node.set_parameters([Parameter("time_budget_s", value=1e-3)]),
             "dynamics raise": lambda: setattr(pl, "base_problem", replace(
@@ -589,7 +589,7 @@ def solver_faults(sizes: Sizes, workdir: Path) -> list[Row]:
         }
 
         def heal():
-            pl.base_problem, pl.replan_options = base, ropts
+            pl.base_problem, pl.policy = base, policy
             node.set_parameters([Parameter("time_budget_s", value=60.0)])
 
         for rep in range(sizes.solver_repeats):

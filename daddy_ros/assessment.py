@@ -1,0 +1,71 @@
+"""Is a solution safe to fly, and does it meet the target? The planner's judgement of every
+solve before it may replace the plan in force. ROS-free."""
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from daddy_core.problem import Problem
+from daddy_core.solver import Solution
+
+from .plan import SATURATION_SLACK
+
+
+@dataclass
+class Assessment:
+    """The verdict on one solution.
+
+    Attributes:
+        safe: finite and within the thrust and mass bounds (it may be flown).
+        feasible: safe and meets the terminal constraints to the solver's tolerance.
+        reason: why not (empty when feasible).
+        U: (N, nu) the controls as flown: thrust magnitudes over the bound by at most
+            SATURATION_SLACK (relative; solver tolerance) saturated onto it -- the engine
+            cannot do more anyway.
+        X: (N+1, nx) the trajectory of U (None when not safe).
+        miss: max terminal-constraint violation of X, at least the solver's DOP853
+            re-propagation miss (inf when not safe).
+    """
+
+    safe: bool
+    feasible: bool
+    reason: str
+    U: np.ndarray
+    X: np.ndarray | None = None
+    miss: float = np.inf
+
+
+def assess(sol: Solution, problem: Problem, feasibility_tol: float) -> Assessment:
+    """Judge ``sol`` of ``problem`` (the solution itself is not changed)."""
+    U = np.array(sol.U, dtype=float)
+    if not (np.all(np.isfinite(U)) and np.all(np.isfinite(sol.X))):
+        return Assessment(False, False, "solution contains NaN or inf", U)
+    umax = problem.u_max
+    excess = 0.0
+    if umax is not None:
+        mags = np.linalg.norm(U, axis=1)
+        if np.max(mags) > umax * (1 + SATURATION_SLACK):
+            return Assessment(False, False, "solution violates the thrust bound", U)
+        over = mags > umax
+        U[over] *= (umax / mags[over])[:, None]
+        excess = float(np.max(mags / umax)) - 1.0
+    if sol.repropagation_miss == np.inf:
+        return Assessment(False, False, "solution could not be re-propagated (DOP853)", U)
+    # the solver's own trajectory, independently re-propagated (DOP853) by solve(), serves as
+    # is; controls changed by the saturation beyond round-off are rolled out again
+    if excess > 1e-9 or sol.repropagation_miss is None:
+        X, repro = problem.rollout(U), 0.0
+    else:
+        X, repro = sol.X, sol.repropagation_miss
+    if not np.all(np.isfinite(X)):
+        return Assessment(False, False, "solution propagates to a non-finite state", U)
+    g, ni = problem.path_constraints(X[:-1].T, U.T, problem.stage_dt)
+    if g is not None and ni and np.max(g[:ni]) > 1e-6:
+        return Assessment(False, False,
+                          f"solution violates a path constraint by {np.max(g[:ni]):.2e}", U)
+    miss = max(problem.terminal_violation(X[-1]), repro)
+    if miss > feasibility_tol:
+        return Assessment(True, False, f"terminal constraint missed by {miss:.2e} (normalised)",
+                          U, X, miss)
+    return Assessment(True, True, "", U, X, miss)

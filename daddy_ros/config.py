@@ -1,0 +1,101 @@
+"""The guidance node's settings: one place for every parameter's name, default, description
+and whether it may change at run time. The node declares its ROS parameters from here, the
+planner takes ``PlannerConfig``, and ``config/guidance.yaml`` lists the same defaults (a test
+checks it)."""
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field, fields
+from pathlib import Path
+
+from daddy_core.errors import DaddyError
+from daddy_core.solver import METHODS
+
+PLANS_DIR = Path(__file__).with_name("plans")   # nominal plans computed by `daddy solve`
+
+
+def bundled_plan(case_name: str, fuel_optimal: bool = True) -> Path | None:
+    """The nominal plan shipped for a catalogue case (``plans/CASE_fuel.json``), if any."""
+    p = PLANS_DIR / f"{case_name}_{'fuel' if fuel_optimal else 'energy'}.json"
+    return p if p.exists() else None
+
+
+def _param(default, description: str, runtime: bool = False):
+    """A dataclass field that is also a node parameter (``runtime``: settable after start-up)."""
+    return field(default=default, metadata={"description": description, "runtime": runtime})
+
+
+@dataclass(frozen=True)
+class PlannerConfig:
+    """What the guidance planner re-optimises and how (SI units; 0 for a tolerance: the case's
+    own)."""
+
+    scenario: str = _param("halo_l2_l1", "catalogue case name or path to a case .json file")
+    method: str = _param("dyn", f"DDP method, one of {', '.join(METHODS)}")
+    polish: bool = _param(True, "Newton polishing after each re-optimisation")
+    fuel_optimal: bool = _param(True, "fuel-optimal cost (else energy-optimal)")
+    stages: int = _param(0, "stage count of the scenario (0: the case's own)")
+    tol_aul: float = _param(0.0, "augmented-Lagrangian tolerance (0: the case's own for cold "
+                                 "solves, 1e-5 for polished warm re-optimisations, which Newton "
+                                 "then takes to tol_newton)")
+    tol_newton: float = _param(0.0, "Newton polishing tolerance (0: the case's own)")
+    time_budget_s: float = _param(60.0, "wall-clock budget of one re-optimisation [s]",
+                                  runtime=True)
+    restore_first: bool = _param(True, "restore feasibility of the warm start by Newton before "
+                                       "DDP, so a re-optimisation stopped by its budget still "
+                                       "yields a feasible plan (and re-plans are faster)")
+    arrival_tolerance_m: float = _param(0.0, "in the arrival phase (the last re-gridded stages) "
+                                             "the terminal position may be this far from the "
+                                             "target, the velocity stays exact [m]; 0: position "
+                                             "exact too")
+    thrust_margin: float = _param(0.05, "fraction of the thrust rating plans hold back for "
+                                        "closed-loop corrections; a re-optimisation gives it up "
+                                        "in steps (with 0.05: 95, 97, 98.5, 100 % of the "
+                                        "rating) only when the target is out of reach "
+                                        "otherwise; 0: the full rating")
+    staleness_s: float = _param(600.0, "estimates older than this relative to the request are "
+                                       "rejected [s]", runtime=True)
+    mass_tolerance_kg: float = 1e-6   # a mass estimate may exceed the wet mass by this (not a parameter)
+
+    def __post_init__(self):
+        if not (math.isfinite(self.arrival_tolerance_m) and self.arrival_tolerance_m >= 0.0):
+            raise DaddyError(f"arrival_tolerance_m must be a finite number >= 0, got "
+                             f"{self.arrival_tolerance_m!r}")
+        if not 0.0 <= self.thrust_margin < 1.0:
+            raise DaddyError(f"thrust_margin must be in [0, 1), got {self.thrust_margin!r}")
+
+
+@dataclass(frozen=True)
+class NodeConfig:
+    """The node's frame, files and topic names."""
+
+    frame_id: str = _param("earth_moon_rotating", "frame of state estimates and thrust")
+    plan_file: str = _param("", "nominal plan (solution JSON) adopted at the first estimate; "
+                                "empty: the bundled nominal of the scenario if any, else a cold "
+                                "solve on request")
+    persist_file: str = _param("", "the current plan is written here after every new plan and "
+                                   "restored from here at start-up (crash recovery); empty: no "
+                                   "persistence")
+    state_topic: str = _param("state_estimate", "nav_msgs/Odometry input")
+    mass_topic: str = _param("mass_estimate", "geometry_msgs/InertiaStamped input (kg)")
+    request_topic: str = _param("replan_request", "std_msgs/Header input: frame_id = request id")
+    schedule_topic: str = _param("control_schedule", "trajectory_msgs/JointTrajectory output (N)")
+    thrust_topic: str = _param("thrust_command", "geometry_msgs/Vector3Stamped output (N)")
+    path_topic: str = _param("planned_path", "nav_msgs/Path output (m)")
+
+
+@dataclass(frozen=True)
+class Parameter:
+    """One node parameter: its name, default, description and whether it may change at run
+    time."""
+
+    name: str
+    default: object
+    description: str
+    runtime: bool
+
+
+def parameters() -> list[Parameter]:
+    """The node's parameters in declaration order: the planner's, then the node's own."""
+    return [Parameter(f.name, f.default, f.metadata["description"], f.metadata["runtime"])
+            for cls in (PlannerConfig, NodeConfig) for f in fields(cls) if f.metadata]

@@ -1,0 +1,133 @@
+"""A valid control schedule (``Plan``), what one re-optimisation produced (``ReplanOutcome``
+with a ``Level``), and the plan file format of the node's persistence. ROS-free; times are
+seconds on the caller's clock, states SI (position m, velocity m/s, mass kg), thrust N."""
+from __future__ import annotations
+
+import json
+import math
+import os
+from dataclasses import dataclass, field
+from enum import Enum
+from pathlib import Path
+
+import numpy as np
+
+from daddy_core.dynamics.units import Units
+from daddy_core.errors import DaddyError
+from daddy_core.solver import Solution
+
+# clock comparisons: times closer than this to a stage boundary count as on it [s]
+TIME_TOLERANCE_S = 1e-6
+# relative thrust-bound excess (solver tolerance) saturated onto the bound rather than rejected
+SATURATION_SLACK = 1e-3
+PLAN_FORMAT = "daddy-plan-1"
+
+
+class Level(str, Enum):
+    """Severity of an outcome, as diagnostic_msgs/DiagnosticStatus names its levels."""
+
+    OK = "OK"
+    WARN = "WARN"
+    ERROR = "ERROR"
+
+    __str__ = str.__str__
+    __format__ = str.__format__
+
+
+@dataclass
+class Plan:
+    """A valid control schedule anchored at ``epoch_s``.
+
+    Attributes:
+        epoch_s: time of the first stage start [s].
+        stage_dt_s: (K,) stage durations [s].
+        thrust_n: (K, 3) thrust per stage [N].
+        states_si: (K+1, 7) predicted states (m, m/s, kg).
+        solution: the Solution (normalised), for warm starts.
+        request_id, solve_time_s, warm_start, max_violation: provenance for diagnostics.
+        thrust_bound_n: the thrust bound the plan was optimised under [N] (a rung of the
+            margin ladder, see ``replan_policy``).
+    """
+
+    epoch_s: float
+    stage_dt_s: np.ndarray
+    thrust_n: np.ndarray
+    states_si: np.ndarray
+    solution: Solution
+    request_id: str = ""
+    solve_time_s: float = 0.0
+    warm_start: bool = False
+    max_violation: float = 0.0
+    thrust_bound_n: float = 0.0
+
+    @classmethod
+    def of(cls, sol: Solution, X: np.ndarray, epoch_s: float, units: Units, thrust_bound: float,
+           request_id: str = "", solve_time_s: float = 0.0, warm_start: bool = False) -> "Plan":
+        """The plan flying ``sol``'s controls from ``epoch_s``, predicted states X (normalised)
+        and thrust bound (normalised)."""
+        return cls(epoch_s, sol.stage_dt * units.tu_s, sol.thrust_n.copy(), units.states_si(X),
+                   sol, request_id, solve_time_s, warm_start, sol.max_violation,
+                   float(units.thrust_n(thrust_bound)))
+
+    @property
+    def stage_start_s(self) -> np.ndarray:
+        """(K,) stage start times relative to ``epoch_s``."""
+        return np.concatenate([[0.0], np.cumsum(self.stage_dt_s)[:-1]])
+
+    @property
+    def end_s(self) -> float:
+        return self.epoch_s + float(np.sum(self.stage_dt_s))
+
+    def thrust_at(self, t_s: float) -> np.ndarray:
+        """Thrust [N] of the stage containing time t (zero before the epoch or after the end)."""
+        rel = t_s - self.epoch_s + TIME_TOLERANCE_S  # a time on a stage boundary opens the stage
+        if rel < 0 or t_s + TIME_TOLERANCE_S >= self.end_s:
+            return np.zeros(3)
+        k = int(np.searchsorted(np.cumsum(self.stage_dt_s), rel, side="right"))
+        return self.thrust_n[min(k, len(self.thrust_n) - 1)].copy()
+
+
+@dataclass
+class ReplanOutcome:
+    """What one re-optimisation produced (ok: a new valid plan was stored)."""
+
+    ok: bool
+    level: Level
+    reason: str
+    request_id: str
+    solve_time_s: float
+    plan: Plan | None
+    iterations: dict = field(default_factory=dict)
+    warm_start: bool = False
+
+
+def write_plan_file(path: str | Path, plan: Plan, scenario: str) -> None:
+    """Write ``plan`` (epoch, provenance and solution) atomically to ``path``."""
+    data = {"format": PLAN_FORMAT, "scenario": scenario, "epoch_s": plan.epoch_s,
+            "request_id": plan.request_id, "solution": plan.solution.to_dict()}
+    path = Path(path)
+    tmp = path.with_name(path.name + ".tmp")
+    tmp.write_text(json.dumps(data, allow_nan=False))
+    os.replace(tmp, path)   # a crash mid-write leaves the previous file intact
+
+
+def read_plan_file(path: str | Path, scenario: str, max_stages: int,
+                   max_thrust_n: float) -> tuple[Solution, float, str]:
+    """(solution, epoch s, request id) of a file written by ``write_plan_file`` for
+    ``scenario``. Raises DaddyError naming what is wrong with the file."""
+    try:
+        data = json.loads(Path(path).read_text())
+        sol = Solution.from_dict(data["solution"])
+        epoch = float(data["epoch_s"])
+    except (OSError, ValueError, KeyError, TypeError) as exc:
+        raise DaddyError(f"persisted plan {path}: unreadable ({exc!r})") from exc
+    if data.get("format") != PLAN_FORMAT or data.get("scenario") != scenario:
+        raise DaddyError(f"persisted plan {path} is not a {PLAN_FORMAT} plan of scenario "
+                         f"{scenario!r}")
+    thrust = sol.thrust_n
+    if not (math.isfinite(epoch) and 1 <= len(thrust) <= max_stages
+            and np.all(np.isfinite(thrust)) and np.all(np.isfinite(sol.X))):
+        raise DaddyError(f"persisted plan {path} has a bad epoch, stage count or values")
+    if np.max(np.linalg.norm(thrust, axis=1)) > max_thrust_n * (1 + SATURATION_SLACK):
+        raise DaddyError(f"persisted plan {path} violates the thrust bound")
+    return sol, epoch, str(data.get("request_id", "restored"))

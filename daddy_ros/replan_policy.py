@@ -1,0 +1,106 @@
+"""How a re-optimisation is solved: the solver options of a cold solve, of a warm re-plan and
+of the arrival phase, and the thrust-margin ladder. ROS-free.
+
+A warm re-plan starts from a converged plan shifted to the new state (``shift``):
+- it runs the last homotopy step only (the plan is fuel-optimal already), the tol_ddp test may
+  stop DDP after one iteration, and the penalty resumes high (WARM_MU_INIT) next to the carried
+  multipliers: with mu = 1 the first DDP pass trades the constraints away and the solve takes
+  far longer;
+- shortened DDP steps raise the Quu damping instead of crawling (``short_step``), and rho
+  carries over between solves;
+- ``restore_first``: Newton first restores feasibility from the plan's stage maps, so that a
+  solve stopped by its time budget still flies a feasible plan from the new state;
+- a polished re-plan stops the AUL at WARM_TOL_AUL unless tol_aul is given: Newton takes the
+  constraints to tol_newton anyway, and the AUL rounds below it changed the cost by ~1e-5
+  relative for a third of the re-plan time;
+- Newton treats inequalities within WARM_ACTIVE_TOL of their bound as active: the AUL leaves a
+  fuel-optimal plan's full-thrust arcs slightly inside the bound, and with them inactive
+  Newton's first minimum-norm step pushed them past it and the next ones pulled them back;
+- DDP does not stop on its prediction alone (``SolverOptions.ddp_stop_on_prediction``): the
+  small steps it would skip are what keeps closed-loop plans optimal (propellant and arrival
+  margin in the Monte Carlo).
+The arrival phase (the re-gridded last stages) keeps the case's AUL tolerance, Newton active
+set and fresh expansions for the polish: its plans decide the arrival miss.
+
+Plans keep a thrust margin for closed-loop corrections and give it up rung by rung
+(MARGIN_LADDER) only as far as the target demands: a fuel-optimal plan rides its bound, so a
+plan that took the full rating at once has nothing left for the next execution error.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass, replace
+
+from daddy_core.catalogue import Case
+from daddy_core.solver import SolverOptions, case_options
+
+from .config import PlannerConfig
+
+# augmented-Lagrangian penalty a warm-started re-optimisation starts from (cold: options' 1)
+WARM_MU_INIT = 1e5
+# augmented-Lagrangian tolerance of a polished warm re-optimisation without an explicit tol_aul
+WARM_TOL_AUL = 1e-5
+# a warm re-optimisation's Newton steps hold inequalities within this of their bound on it (the
+# thrust bound is |u|^2 / u_max^2 - 1 <= 0: |u| within 5e-5 relative of u_max)
+WARM_ACTIVE_TOL = 1e-4
+# thrust ratings a re-plan climbs through when the one below cannot meet the target, as the
+# fraction of the thrust margin still held back (1: the derated bound, 0: the full rating)
+MARGIN_LADDER = (1.0, 0.6, 0.3, 0.0)
+# the climb stops when a rung leaves more than this fraction of the miss of the rung below
+LADDER_MIN_GAIN = 0.9
+
+
+@dataclass(frozen=True)
+class ReplanPolicy:
+    """The solver options of each kind of solve.
+
+    Attributes:
+        cold: a solve without a plan (the case's settings, the whole homotopy).
+        warm: a warm re-plan before the arrival phase (see the module docstring).
+        arrival: a warm re-plan of the arrival phase.
+    """
+
+    cold: SolverOptions
+    warm: SolverOptions
+    arrival: SolverOptions
+
+    @classmethod
+    def of(cls, case: Case, config: PlannerConfig) -> "ReplanPolicy":
+        overrides = {}
+        if config.tol_aul:
+            overrides["tol_aul"] = config.tol_aul
+        if config.tol_newton:
+            overrides["tol_newton"] = config.tol_newton
+        cold = case_options(case, config.fuel_optimal, time_budget_s=config.time_budget_s,
+                            **overrides)
+        warm_tol_aul = config.tol_aul or (max(WARM_TOL_AUL, cold.tol_aul) if config.polish
+                                          else cold.tol_aul)
+        warm = cold.with_(homotopy=cold.homotopy[-1:], ddp_min_iter=1, mu_init=WARM_MU_INIT,
+                          short_step=0.5, carry_rho=True,
+                          restore_warm_start=bool(config.restore_first), tol_aul=warm_tol_aul,
+                          polish_from_ddp_maps=True,
+                          newton_active_tol=max(WARM_ACTIVE_TOL, cold.newton_active_tol))
+        arrival = warm.with_(tol_aul=cold.tol_aul, polish_from_ddp_maps=False,
+                             newton_active_tol=cold.newton_active_tol)
+        return cls(cold, warm, arrival)
+
+    def options(self, warm: bool, arrival: bool) -> SolverOptions:
+        """The options of a cold solve, a warm re-plan or one of the arrival phase."""
+        if not warm:
+            return self.cold
+        return self.arrival if arrival else self.warm
+
+    def with_time_budget(self, time_budget_s: float) -> "ReplanPolicy":
+        """Every kind of solve with another wall-clock budget."""
+        return replace(self, **{k: getattr(self, k).with_(time_budget_s=time_budget_s)
+                                for k in ("cold", "warm", "arrival")})
+
+    def with_warm(self, **options) -> "ReplanPolicy":
+        """Warm re-plans (arrival phase included) with other solver options (experiments)."""
+        return replace(self, warm=self.warm.with_(**options),
+                       arrival=self.arrival.with_(**options))
+
+
+def margin_ratings(rating_n: float, thrust_margin: float) -> list[float]:
+    """The thrust bounds [N] of the margin ladder's rungs, lowest first."""
+    return [rating_n * (1.0 - thrust_margin * held)
+            for held in (MARGIN_LADDER if thrust_margin > 0 else (0.0,))]

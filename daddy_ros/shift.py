@@ -1,0 +1,115 @@
+"""The warm-start shift: the remaining problem of a plan in flight, from a new state at a new
+time, and the arrival phase's re-grid and terminal constraints. ROS-free.
+
+Stages already executed are dropped and the time to go is kept: the first remaining stage is
+shortened to end on the plan's stage boundary, or merged into the next when shorter than
+MIN_STAGE_FRACTION of a stage. Fewer than MIN_STAGES_LEFT stages are re-gridded into that many
+(the arrival phase), so that enough controls remain for the terminal constraints.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass, replace
+
+import numpy as np
+
+from daddy_core.da import functions as dm
+from daddy_core.dynamics.units import Units
+from daddy_core.problem import Problem
+from daddy_core.solver import WarmStart
+
+from .checks import InputRejected
+from .plan import TIME_TOLERANCE_S, Plan
+
+# a first remaining stage shorter than this fraction of a nominal stage is merged into the next
+MIN_STAGE_FRACTION = 0.25
+MIN_STAGES_LEFT = 4  # a re-plan keeps at least this many stages to the end (re-gridded)
+ARRIVAL_SPEED_SCALE_M_S = 0.01  # a position one arrival tolerance off weighs as 1 cm/s
+
+
+@dataclass
+class Shifted:
+    """The remaining problem and what the plan lends its solve.
+
+    Attributes:
+        problem: from the new state, with the remaining stages (normalised).
+        start: the plan's controls, duals, rho and stage maps for those stages (None without
+            a plan: a cold solve).
+        arrival: the stages were re-gridded (the arrival phase).
+    """
+
+    problem: Problem
+    start: WarmStart | None = None
+    arrival: bool = False
+
+
+def shift_plan(base: Problem, plan: Plan | None, t_s: float, x0: np.ndarray, units: Units,
+               arrival_tolerance_m: float = 0.0) -> Shifted:
+    """The remaining problem of ``plan`` (stages of ``base``) from state x0 (normalised) at
+    time t_s (see the module docstring); without a plan, the full problem from x0. In the
+    arrival phase the terminal position may keep ``arrival_tolerance_m`` from the target
+    (``arrival_constraints``)."""
+    if plan is None:
+        return Shifted(base.with_x0(x0))
+    bounds = plan.epoch_s + np.cumsum(plan.stage_dt_s)          # stage end times
+    k0 = int(np.searchsorted(bounds, t_s + TIME_TOLERANCE_S, side="right"))
+    if k0 >= len(plan.stage_dt_s):
+        raise InputRejected("the plan has ended: no stage remains after header.stamp")
+    first = bounds[k0] - t_s
+    dts = plan.stage_dt_s[k0:].astype(float).copy()
+    U = plan.solution.U[k0:].copy()
+    lam = np.asarray(plan.solution.duals.get("lam", []), float)
+    lam = lam[:, k0:] if lam.ndim == 2 and lam.shape[1] == len(plan.stage_dt_s) else None
+    nominal = float(np.median(plan.stage_dt_s))
+    maps = plan.solution.stage_maps
+    if first < MIN_STAGE_FRACTION * nominal and len(dts) > 1:
+        dts = dts[1:]
+        dts[0] += first
+        U = U[1:]
+        lam = None if lam is None else lam[:, 1:]
+        maps = None if maps is None else maps.tail(k0 + 1, first_valid=False)
+    else:
+        maps = None if maps is None else maps.tail(
+            k0, first_valid=abs(first - dts[0]) <= TIME_TOLERANCE_S)
+        dts[0] = first
+    arrival = len(dts) < MIN_STAGES_LEFT
+    if arrival:
+        # re-grid the time to go into MIN_STAGES_LEFT equal stages, warm-started from the
+        # plan's stage at each new stage's midpoint
+        total = float(np.sum(dts))
+        mids = (np.arange(MIN_STAGES_LEFT) + 0.5) * total / MIN_STAGES_LEFT
+        idx = np.minimum(np.searchsorted(np.cumsum(dts), mids), len(dts) - 1)
+        dts = np.full(MIN_STAGES_LEFT, total / MIN_STAGES_LEFT)
+        U = U[idx]
+        maps = None
+        lam = None if lam is None else lam[:, idx]
+    duals = None if lam is None else {"lam": lam, "lam_t": plan.solution.duals.get("lam_t", [])}
+    problem = base.with_x0(x0, dts / units.tu_s)
+    if arrival:
+        problem = arrival_constraints(problem, arrival_tolerance_m, units)
+    return Shifted(problem, WarmStart(U, duals, plan.solution.rho, maps), arrival)
+
+
+def arrival_constraints(problem: Problem, tolerance_m: float, units: Units) -> Problem:
+    """The arrival phase's terminal constraints (with ``tolerance_m`` > 0): the velocity exact,
+    the position within the tolerance of the target. In the last hours a position error of the
+    order of the navigation error cannot be removed at any acceptable cost, and demanding it
+    makes the problem infeasible and the best-effort plans trade velocity for it.
+
+    The ball is s (|r - r_t| / tolerance - 1) <= 0 with s = 1 cm/s in normalised speed units: a
+    position one tolerance beyond the ball weighs as much as a 1 cm/s velocity miss wherever
+    terminal violations are compared (solver tolerances, the planner's best-effort choice), and
+    the constraint only turns active (Newton) within 10 % of R.
+    """
+    gt, _ = problem.terminal_constraints(problem.x_target)
+    if not tolerance_m or gt is None or gt.shape != (6,):
+        return problem
+    R = float(units.length(tolerance_m))
+    scale = float(units.speed(ARRIVAL_SPEED_SCALE_M_S))
+    floor2 = (1e-3 * R) ** 2
+
+    def position_ball(x, xt):
+        d = x[:3] - xt[:3]
+        return (dm.sqrt(d[0] * d[0] + d[1] * d[1] + d[2] * d[2] + floor2) * (scale / R)
+                - scale)[None]
+
+    return replace(problem, g_tineq=position_ball, g_teq=lambda x, xt: x[3:6] - xt[3:6])
