@@ -12,7 +12,6 @@ import signal
 import sys
 import threading
 import time
-from collections import deque
 from pathlib import Path
 
 import rclpy
@@ -35,10 +34,10 @@ from daddy_core.catalogue import list_cases, load_case
 from daddy_core.errors import DaddyError
 
 from . import conversions as cv
-from .checks import FUTURE_TOLERANCE_S, InputRejected
+from .checks import InputRejected
 from .config import NodeConfig, PlannerConfig, bundled_plan, parameters
-from .plan import TIME_TOLERANCE_S
 from .planner import GuidancePlanner
+from .request_queue import RequestQueue
 from .spin import SpinThread, spin_guarded
 
 NODE_NAME = "daddy_guidance"
@@ -49,10 +48,6 @@ RELIABLE = QoSProfile(depth=10, reliability=ReliabilityPolicy.RELIABLE,
 
 NAMES = {p.name for p in parameters()}
 RUNTIME = {p.name for p in parameters() if p.runtime}   # time_budget_s, staleness_s
-STATE_HISTORY = 64   # accepted estimates kept to serve requests stamped in their past
-# a request stamped after the newest estimate waits this long for the estimate of its time
-# (topics are not ordered with each other: a request can overtake the estimate sent before it)
-ESTIMATE_WAIT_S = 0.5
 
 
 class GuidanceNode(Node):
@@ -71,18 +66,8 @@ class GuidanceNode(Node):
         cfg = NodeConfig(**{f: g(f) for f in NodeConfig.__dataclass_fields__})
         self.frame_id = cfg.frame_id
         self.plan_file = cfg.plan_file or self._bundled_plan()
-        self._lock = threading.Lock()
-        self._wake = threading.Condition(self._lock)
-        self._states = deque(maxlen=STATE_HISTORY)   # accepted (pos, vel, stamp), arrival order
-        self._masses = deque(maxlen=STATE_HISTORY)   # accepted (stamp, mass kg), arrival order
-        self._pending = None        # (request_id, request_stamp, monotonic arrival) to solve
-        self._busy = False
-        self._n_started = 0         # solves started / finished (sequential, one worker)
-        self._n_finished = 0
-        self._last = ("ERROR", "no solve yet", False)   # (level, reason, new plan stored)
-        self._stop = False
+        self.queue = RequestQueue()
         self.replans = 0
-        self.coalesced = 0
         self.persist_file = cfg.persist_file
         self._replan_on_first_estimate = False
 
@@ -157,9 +142,7 @@ class GuidanceNode(Node):
         except InputRejected as exc:
             self._reject("state_estimate", str(exc), stamp)
             return
-        with self._lock:
-            self._states.append((pos, vel, stamp))
-            self._wake.notify_all()
+        self.queue.add_state(pos, vel, stamp)
         plan = self.planner.plan or self._adopt_nominal()
         if plan is not None:
             self.pub_thrust.publish(cv.thrust_command(plan.thrust_at(stamp), stamp, self.frame_id))
@@ -172,20 +155,15 @@ class GuidanceNode(Node):
         except InputRejected as exc:
             self._reject("mass_estimate", str(exc), stamp)
             return
-        with self._lock:
-            self._masses.append((stamp, mass))
-            self._wake.notify_all()
+        self.queue.add_mass(stamp, mass)
         if self.planner.plan is None:
             self._adopt_nominal()
         self._maybe_replan_after_restart()
 
     def _maybe_replan_after_restart(self):
-        with self._lock:
-            go = self._replan_on_first_estimate and self._states and self._masses
-            if go:
-                self._replan_on_first_estimate = False
-        if go:
-            self._enqueue("restart", None)
+        if self._replan_on_first_estimate and self.queue.has_estimates():
+            self._replan_on_first_estimate = False
+            self.queue.enqueue("restart", None)
 
     def _restore(self):
         """Start-up after a crash: adopt the persisted plan and re-plan at the first estimate."""
@@ -209,30 +187,13 @@ class GuidanceNode(Node):
             return f"persist_file not written: {exc}"
         return ""
 
-    def _state_for(self, request_stamp: float | None):
-        """The estimate a request is served from: the newest received (service requests), or the
-        newest stamped at most FUTURE_TOLERANCE_S after the request's mission time (its stamp
-        plus its wait in the queue; topic requests). Raises InputRejected when every stored
-        estimate is in the future of that time."""
-        with self._lock:
-            states = list(self._states)
-        if not states or request_stamp is None:
-            return states[-1] if states else None
-        usable = [s for s in states if s[2] <= request_stamp + FUTURE_TOLERANCE_S]
-        if not usable:
-            ahead = min(s[2] for s in states) - request_stamp
-            raise InputRejected(f"every state_estimate is in the future of the request stamp "
-                                f"(the oldest by {ahead:.3g} s)")
-        return max(usable, key=lambda s: s[2])
-
     def _adopt_nominal(self):
         """Adopt the nominal plan at the first estimate (state and mass both received)."""
-        state = self._state_for(None)
-        with self._lock:
-            mass, plan_file = bool(self._masses), self.plan_file
-        if not plan_file or state is None or not mass:
+        state = self.queue.state_for(None)
+        plan_file = self.plan_file
+        if not plan_file or state is None or not self.queue.has_estimates():
             return None
-        stamp = state[2]
+        stamp = state.stamp_s
         try:
             plan = self.planner.load_plan(plan_file, stamp)
         except Exception as exc:
@@ -246,26 +207,13 @@ class GuidanceNode(Node):
         return plan
 
     def _on_request(self, msg: Header):
-        self._enqueue(msg.frame_id or "topic", cv.stamp_to_s(msg.stamp))
-
-    def _enqueue(self, request_id: str, stamp_s: float | None) -> int:
-        """Queue a re-optimisation; returns the number of the solve that will serve it."""
-        with self._lock:
-            if self._pending is not None or self._busy:
-                self.coalesced += 1
-            self._pending = (request_id, stamp_s, time.monotonic())
-            self._wake.notify()
-            return self._n_started + 1
+        self.queue.enqueue(msg.frame_id or "topic", cv.stamp_to_s(msg.stamp))
 
     def _on_service(self, request, response):
-        target = self._enqueue(f"service-{time.monotonic_ns()}", None)
-        deadline = time.monotonic() + self.planner.time_budget_s * 3 + 10
-        with self._lock:
-            # the next solve to start absorbs this request (coalescing); wait for it to finish
-            while self._n_finished < target and time.monotonic() < deadline and not self._stop:
-                self._wake.wait(0.1)
-            done = self._n_finished >= target
-            level, reason, stored = self._last
+        target = self.queue.enqueue(f"service-{time.monotonic_ns()}", None)
+        # the next solve to start absorbs this request (coalescing); wait for it to finish
+        done, (level, reason, stored) = self.queue.wait_done(
+            target, self.planner.time_budget_s * 3 + 10)
         response.success = done and stored and level != "ERROR"
         response.message = f"{level}: {reason}" if done else "timed out waiting for the solve"
         return response
@@ -273,69 +221,30 @@ class GuidanceNode(Node):
     # ------------------------------------------------------------------ worker
     def _work(self):
         while True:
-            with self._lock:
-                while self._pending is None and not self._stop:
-                    self._wake.wait(0.2)
-                if self._stop:
-                    return
-                request_id, request_stamp, arrived = self._pending
-                self._pending = None
-                self._wait_for_estimate(request_stamp)
-                if request_stamp is not None:
-                    # mission time now: the request stamp plus the time it waited in the queue
-                    request_stamp += time.monotonic() - arrived
-                self._busy = True
-                self._n_started += 1
+            req = self.queue.take()
+            if req is None:
+                return
             try:
-                self._replan_once(request_id, request_stamp)
+                self._replan_once(req.request_id, req.stamp_s)
             except Exception as exc:  # never let the worker die
-                self._finish(request_id, None, "ERROR", f"internal error: {exc!r}", None)
+                self._finish(req.request_id, None, "ERROR", f"internal error: {exc!r}", None)
             finally:
-                with self._lock:
-                    self._busy = False
-                    self._n_finished += 1
-                    self._wake.notify_all()
-
-    def _wait_for_estimate(self, request_stamp: float | None) -> None:
-        """(lock held) Wait up to ESTIMATE_WAIT_S for an estimate stamped near the request and
-        for the mass estimate of the newest state's time (topics arrive in any order)."""
-        end = time.monotonic() + ESTIMATE_WAIT_S
-
-        def ready():
-            if not self._states:
-                return False
-            newest = max(s[2] for s in self._states)
-            if request_stamp is not None and newest < request_stamp - FUTURE_TOLERANCE_S:
-                return False
-            return any(m[0] >= newest - TIME_TOLERANCE_S for m in self._masses)
-
-        while not self._stop and time.monotonic() < end and not ready():
-            self._wake.wait(0.02)
-
-    def _mass_for(self, stamp: float) -> float | None:
-        """The mass estimate of the state's time: same stamp, else the newest before it, else
-        the newest received (mass changes slowly; its own checks already passed)."""
-        with self._lock:
-            masses = list(self._masses)
-        if not masses:
-            return None
-        before = [m for m in masses if m[0] <= stamp + TIME_TOLERANCE_S]
-        return max(before)[1] if before else masses[-1][1]
+                self.queue.done()
 
     def _replan_once(self, request_id, request_stamp):
         started = {"solve_start_unix_s": f"{time.time():.6f}"}
         try:
-            state = self._state_for(request_stamp)
+            state = self.queue.state_for(request_stamp)
         except InputRejected as exc:
             self._finish(request_id, None, "ERROR", f"input rejected: {exc}", request_stamp, started)
             return
-        now = request_stamp if request_stamp is not None else (state[2] if state else None)
-        mass = None if state is None else self._mass_for(state[2])
+        now = request_stamp if request_stamp is not None else (state.stamp_s if state else None)
+        mass = None if state is None else self.queue.mass_for(state.stamp_s)
         if state is None or mass is None:
             self._finish(request_id, None, "ERROR", "no valid state_estimate and mass_estimate yet",
                          now, started)
             return
-        pos, vel, stamp = state
+        pos, vel, stamp = state.pos_m, state.vel_m_s, state.stamp_s
         started["state_stamp_s"] = f"{stamp:.9f}"
         try:
             out = self.planner.replan(pos, vel, mass, stamp, request_id,
@@ -366,8 +275,7 @@ class GuidanceNode(Node):
                            "final_mass_kg": f"{plan.states_si[-1, 6]:.4f}",
                            "thrust_bound_n": f"{plan.thrust_bound_n:.6g}"})
         self._diag(level, reason, values, stamp)
-        with self._lock:
-            self._last = (level, reason, bool(out is not None and out.ok))
+        self.queue.record(level, reason, bool(out is not None and out.ok))
 
     def adopt_plan(self, plan) -> None:
         """Make ``plan`` the current plan and publish it (e.g. a nominal computed elsewhere)."""
@@ -394,10 +302,13 @@ class GuidanceNode(Node):
         elif level != "OK":
             self.get_logger().warning(f"{level}: {message}")
 
+    @property
+    def coalesced(self) -> int:
+        """Requests merged into a later solve so far."""
+        return self.queue.coalesced
+
     def stop(self):
-        with self._lock:
-            self._stop = True
-            self._wake.notify_all()
+        self.queue.stop()
         self._worker.join(timeout=5.0)
 
 
