@@ -55,7 +55,8 @@ class PlannerConfig:
                                         "otherwise; 0: the full rating")
     staleness_s: float = _param(600.0, "estimates older than this relative to the request are "
                                        "rejected [s]", runtime=True)
-    mass_tolerance_kg: float = 1e-6   # a mass estimate may exceed the wet mass by this (not a parameter)
+    # a mass estimate may exceed the wet mass by this [kg] (not a node parameter)
+    mass_tolerance_kg: float = 1e-6
 
     def __post_init__(self):
         if not (math.isfinite(self.arrival_tolerance_m) and self.arrival_tolerance_m >= 0.0):

@@ -12,12 +12,12 @@ from nav_msgs.msg import Odometry, Path
 from std_msgs.msg import Header
 from trajectory_msgs.msg import JointTrajectory, JointTrajectoryPoint
 
-from .planner import Plan
+from .plan import Level, Plan
 
 JOINT_NAMES = ["thrust_x", "thrust_y", "thrust_z"]
 STATUS_NAME = "daddy_guidance: replan"
-LEVELS = {"OK": DiagnosticStatus.OK, "WARN": DiagnosticStatus.WARN,
-          "ERROR": DiagnosticStatus.ERROR, "STALE": DiagnosticStatus.STALE}
+LEVELS = {Level.OK: DiagnosticStatus.OK, Level.WARN: DiagnosticStatus.WARN,
+          Level.ERROR: DiagnosticStatus.ERROR}
 
 
 def stamp_to_s(t: Time) -> float:
@@ -100,7 +100,7 @@ def plan_to_path(plan: Plan, frame_id: str) -> Path:
     return msg
 
 
-def diagnostics(level: str, message: str, values: dict, stamp_s: float,
+def diagnostics(level: Level, message: str, values: dict, stamp_s: float,
                 hardware_id: str = "daddy_guidance") -> DiagnosticArray:
     st = DiagnosticStatus(level=LEVELS[level], name=STATUS_NAME, message=message[:500],
                           hardware_id=hardware_id)

@@ -21,6 +21,7 @@ import numpy as np
 
 from .checks import InputRejected
 from .config import bundled_plan
+from .plan import Level
 from .planner import GuidancePlanner
 from .sim import T0_S, Errors, TruthSim
 
@@ -84,7 +85,7 @@ class RosLink:
         if vals.get("plan_kept") == "no":
             c.wait_for(lambda: (c.latest_schedule() or (-np.inf,))[0] >= t_s - 1e-3,
                        max(0.0, self.timeout_s - (time.perf_counter() - t0)))
-        names = {0: "OK", 1: "WARN", 2: "ERROR"}
+        names = {0: Level.OK, 1: Level.WARN, 2: Level.ERROR}
         return names.get(level, f"ERROR {text}"), time.perf_counter() - t0
 
     def thrust_at(self, t_s, pos, vel, mass):

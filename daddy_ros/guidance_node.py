@@ -36,6 +36,7 @@ from daddy_core.errors import DaddyError
 from . import conversions as cv
 from .checks import InputRejected
 from .config import NodeConfig, PlannerConfig, bundled_plan, parameters
+from .plan import Level
 from .planner import GuidancePlanner
 from .request_queue import RequestQueue
 from .spin import SpinThread, spin_guarded
@@ -105,7 +106,8 @@ class GuidanceNode(Node):
         start-up. A rejected update changes nothing."""
         why = next((r for r in map(self._parameter_problem, params) if r), None)
         if why:
-            self._diag("WARN", f"parameter update rejected: {why}", {"field": "parameters"}, None)
+            self._diag(Level.WARN,
+                f"parameter update rejected: {why}", {"field": "parameters"}, None)
             return SetParametersResult(successful=False, reason=why)
         self.planner.update(**{p.name: p.value for p in params if p.name in RUNTIME})
         return SetParametersResult(successful=True)
@@ -128,7 +130,8 @@ class GuidanceNode(Node):
     # ------------------------------------------------------------------ inputs
     def _reject(self, topic: str, reason: str, stamp: float) -> None:
         """An input that is not used: ERROR diagnostic naming the field; nothing else changes."""
-        self._diag("ERROR", f"input rejected: {reason}", {"topic": topic, "stamp_s": f"{stamp:.9f}"},
+        self._diag(Level.ERROR,
+            f"input rejected: {reason}", {"topic": topic, "stamp_s": f"{stamp:.9f}"},
                    stamp if math.isfinite(stamp) and stamp > 0 else None, log_every_s=1.0)
 
     def _on_state(self, msg: Odometry):
@@ -170,11 +173,13 @@ class GuidanceNode(Node):
         try:
             plan = self.planner.restore_plan(self.persist_file)
         except DaddyError as exc:
-            self._diag("ERROR", f"persist_file not restored: {exc}", {"field": "persist_file"}, None)
+            self._diag(Level.ERROR,
+                f"persist_file not restored: {exc}", {"field": "persist_file"}, None)
             return
         self._publish_plan(plan, None)
         self._replan_on_first_estimate = True
-        self._diag("WARN", f"restored the persisted plan (epoch {plan.epoch_s:.3f} s); re-planning "
+        self._diag(Level.WARN,
+            f"restored the persisted plan (epoch {plan.epoch_s:.3f} s); re-planning "
                    "at the first estimate", {"request_id": "restored"}, plan.epoch_s)
 
     def _persist(self) -> str:
@@ -197,12 +202,13 @@ class GuidanceNode(Node):
         try:
             plan = self.planner.load_plan(plan_file, stamp)
         except Exception as exc:
-            self._diag("ERROR", f"cannot load plan_file: {exc}", {}, stamp)
+            self._diag(Level.ERROR, f"cannot load plan_file: {exc}", {}, stamp)
             self.plan_file = ""
             return None
         self._publish_plan(plan, stamp)
         self._persist()
-        self._diag("OK", f"adopted nominal plan {Path(plan_file).name}", {"request_id": "nominal"},
+        self._diag(Level.OK,
+            f"adopted nominal plan {Path(plan_file).name}", {"request_id": "nominal"},
                    stamp)
         return plan
 
@@ -214,7 +220,7 @@ class GuidanceNode(Node):
         # the next solve to start absorbs this request (coalescing); wait for it to finish
         done, (level, reason, stored) = self.queue.wait_done(
             target, self.planner.time_budget_s * 3 + 10)
-        response.success = done and stored and level != "ERROR"
+        response.success = done and stored and level is not Level.ERROR
         response.message = f"{level}: {reason}" if done else "timed out waiting for the solve"
         return response
 
@@ -227,7 +233,7 @@ class GuidanceNode(Node):
             try:
                 self._replan_once(req.request_id, req.stamp_s)
             except Exception as exc:  # never let the worker die
-                self._finish(req.request_id, None, "ERROR", f"internal error: {exc!r}", None)
+                self._finish(req.request_id, None, Level.ERROR, f"internal error: {exc!r}", None)
             finally:
                 self.queue.done()
 
@@ -236,12 +242,14 @@ class GuidanceNode(Node):
         try:
             state = self.queue.state_for(request_stamp)
         except InputRejected as exc:
-            self._finish(request_id, None, "ERROR", f"input rejected: {exc}", request_stamp, started)
+            self._finish(request_id,
+                None, Level.ERROR, f"input rejected: {exc}", request_stamp, started)
             return
         now = request_stamp if request_stamp is not None else (state.stamp_s if state else None)
         mass = None if state is None else self.queue.mass_for(state.stamp_s)
         if state is None or mass is None:
-            self._finish(request_id, None, "ERROR", "no valid state_estimate and mass_estimate yet",
+            self._finish(request_id,
+                None, Level.ERROR, "no valid state_estimate and mass_estimate yet",
                          now, started)
             return
         pos, vel, stamp = state.pos_m, state.vel_m_s, state.stamp_s
@@ -250,13 +258,13 @@ class GuidanceNode(Node):
             out = self.planner.replan(pos, vel, mass, stamp, request_id,
                                       now_s=request_stamp)
         except InputRejected as exc:
-            self._finish(request_id, None, "ERROR", f"input rejected: {exc}", now, started)
+            self._finish(request_id, None, Level.ERROR, f"input rejected: {exc}", now, started)
             return
         self.replans += 1
         if out.ok:
             why = self._persist()
             if why:
-                out.level, out.reason = "WARN", f"{out.reason}; {why}"
+                out.level, out.reason = Level.WARN, f"{out.reason}; {why}"
         self._finish(request_id, out, out.level, out.reason, stamp, started)
 
     def _finish(self, request_id, out, level, reason, stamp, extra=None):
@@ -282,7 +290,7 @@ class GuidanceNode(Node):
         self.planner.set_plan(plan)
         self._publish_plan(plan, plan.epoch_s)
         self._persist()
-        self._diag("OK", "adopted a plan", {"request_id": plan.request_id or "adopted"},
+        self._diag(Level.OK, "adopted a plan", {"request_id": plan.request_id or "adopted"},
                    plan.epoch_s)
 
     # ------------------------------------------------------------------ outputs
@@ -297,9 +305,9 @@ class GuidanceNode(Node):
             stamp = self.get_clock().now().nanoseconds * 1e-9
         self.pub_diag.publish(cv.diagnostics(level, message, values, stamp))
         # rclpy fixes a call site's filters at its first call: one call site per filter
-        if level != "OK" and log_every_s:
+        if level is not Level.OK and log_every_s:
             self.get_logger().warning(f"{level}: {message}", throttle_duration_sec=log_every_s)
-        elif level != "OK":
+        elif level is not Level.OK:
             self.get_logger().warning(f"{level}: {message}")
 
     @property
@@ -339,7 +347,7 @@ def run(node_factory, args=None) -> int:
         side_executor = SpinThread(side)
     def report(exc):
         if hasattr(node, "_diag"):
-            node._diag("ERROR", f"internal error in a callback: {exc!r}", {}, None)
+            node._diag(Level.ERROR, f"internal error in a callback: {exc!r}", {}, None)
 
     try:
         spin_guarded(executor, stop, report)

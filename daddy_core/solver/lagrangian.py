@@ -1,6 +1,7 @@
 """The augmented Lagrangian of paper eq. 8: multipliers, the penalty, augmented costs.
 
-    J~ = sum_k [ l(x_k, u_k) + (lam_k + I_mu,k / 2 g_k) . g_k ] + phi(x_N) + (lam_t + I_mu,t / 2 g_t) . g_t
+    J~ = sum_k [ l(x_k, u_k) + (lam_k + I_mu,k / 2 g_k) . g_k ]
+         + phi(x_N) + (lam_t + I_mu,t / 2 g_t) . g_t
 
 Written once for floats and DA (the DDP model expands these same functions); the outer loop that
 updates the multipliers (eq. 9) is ``aul``.
@@ -36,7 +37,8 @@ class Multipliers:
         nc = 0 if g is None else g.shape[0]
         nt = 0 if gt is None else gt.shape[0]
         N = problem.N
-        return cls(np.zeros((nc, N)), np.full((nc, N), mu0), np.zeros(nt), np.full(nt, mu0), ni, nti)
+        return cls(np.zeros((nc, N)), np.full((nc, N), mu0), np.zeros(nt), np.full(nt, mu0), ni,
+                   nti)
 
     def take_duals(self, duals: dict | None) -> None:
         """Adopt warm-start duals {"lam": (n_c, N), "lam_t": (n_t,)} where their shapes fit

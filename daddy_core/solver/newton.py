@@ -319,7 +319,8 @@ def _inner_iterations(model: _Model, sigma: _BandedSigma, dmax: float, opts: Sol
     dY = np.zeros(model.D.shape[1])
     r = np.inf
     inner = 0
-    while dmax > opts.tol_newton and r > opts.newton_cv_ratio and inner < opts.newton_inner_max_iter:
+    while (dmax > opts.tol_newton and r > opts.newton_cv_ratio
+           and inner < opts.newton_inner_max_iter):
         step = sigma.step(d)
         alpha, dstar = 1.0, None
         for _ in range(opts.newton_ls_max_halvings):
