@@ -324,8 +324,7 @@ def run(node_factory, args=None) -> int:
     """Spin a node with our own SIGINT/SIGTERM handling and a clean shutdown sequence.
 
     The node's callbacks run on a single-threaded executor (rclpy's multi-threaded executor
-    busy-polls: measured ~95 % of a core at 50 Hz estimates vs ~13 % here, CPU the solver
-    worker needs); a blocking service hosted on ``node.service_node`` gets its own executor
+    busy-polls, taking CPU the solver worker needs); a blocking service hosted on ``node.service_node`` gets its own executor
     thread so it never stalls the subscriptions.
     """
     os.environ.setdefault("ROS_AUTOMATIC_DISCOVERY_RANGE", "LOCALHOST")

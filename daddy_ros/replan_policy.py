@@ -11,8 +11,8 @@ A warm re-plan starts from a converged plan shifted to the new state (``shift``)
 - ``restore_first``: Newton first restores feasibility from the plan's stage maps, so that a
   solve stopped by its time budget still flies a feasible plan from the new state;
 - a polished re-plan stops the AUL at WARM_TOL_AUL unless tol_aul is given: Newton takes the
-  constraints to tol_newton anyway, and the AUL rounds below it changed the cost by ~1e-5
-  relative for a third of the re-plan time;
+  constraints to tol_newton anyway, and the AUL rounds below it change the cost very little
+  for a large share of the re-plan time;
 - Newton treats inequalities within WARM_ACTIVE_TOL of their bound as active: the AUL leaves a
   fuel-optimal plan's full-thrust arcs slightly inside the bound, and with them inactive
   Newton's first minimum-norm step pushed them past it and the next ones pulled them back;
