@@ -80,3 +80,23 @@ def test_problem_settings_are_apart_from_solver_settings():
     d["solver"]["stage_cost_gain"] = d["problem"].pop("stage_cost_gain")
     with pytest.raises(DaddyError, match="solver.stage_cost_gain' belongs in 'problem'"):
         case_from_dict(d)
+
+
+@pytest.mark.parametrize("name", ["earth_mars", "halo_l2_l1", "leo_leo", "double_integrator"])
+def test_states_convert_to_si_and_back_for_every_system(name):
+    # one place for the state <-> SI conversion (Units), including the equinoctial elements,
+    # checked against the unit definitions themselves
+    c = load_case(name)
+    u = c.units
+    si = u.states_si(c.x0)
+    np.testing.assert_allclose(u.states_normalised(si), c.x0, rtol=1e-15)
+    if c.system == "earth_equinoctial":
+        assert si[0] == pytest.approx(6778e3)                     # a [m] (paper Table 10 LEO)
+        np.testing.assert_array_equal(si[1:6], c.x0[1:6])          # p, q, r, s, L unchanged
+    else:
+        assert si[0] == pytest.approx(c.x0[0] * u.lu_km * 1e3)
+        assert si[3] == pytest.approx(c.x0[3] * u.lu_km * 1e3 / u.tu_s)
+    if c.x0.size == 7:
+        assert si[6] == pytest.approx(c.spacecraft.wet_mass_kg)
+    batch = u.states_si(np.stack([c.x0, c.x0]))                    # (..., nx) arrays alike
+    np.testing.assert_array_equal(batch[1], si)

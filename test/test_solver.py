@@ -274,3 +274,32 @@ def test_repropagation_miss_is_inf_when_the_check_fails():
     sol = solve_case("double_integrator")
     sol.repropagation_miss = np.inf
     assert Solution.from_json(sol.to_json()).repropagation_miss == np.inf
+
+
+def test_methods_are_an_enum_of_a_sweep_and_a_forward_pass():
+    from daddy_core.solver import METHODS, Method, Sweep
+    assert METHODS == ("std", "hess", "q", "dyn", "hessdyn", "qdyn")        # paper Table 1
+    table = {m: (Method.parse(m).sweep, Method.parse(m).dyn) for m in METHODS}
+    assert table == {"std": (Sweep.STD, False), "hess": (Sweep.HESS, False),
+                     "q": (Sweep.Q, False), "dyn": (Sweep.STD, True),
+                     "hessdyn": (Sweep.HESS, True), "qdyn": (Sweep.Q, True)}
+    assert Method.parse(Method.QDYN) is Method.QDYN
+    with pytest.raises(DaddyError, match="method must be one of"):
+        Method.parse("newton")
+
+
+def test_a_warm_start_object_carries_what_a_solution_lends():
+    # WarmStart is solve()'s one warm-start channel: from a Solution it takes U and the duals,
+    # the maps only for the same stage durations, rho only with carry_rho
+    from daddy_core.solver import WarmStart
+    case = load_case("double_integrator")
+    prob = problem_from_case(case)
+    sol = solve(prob, np.zeros((prob.N, 3)), method="dyn", options=case_options(case, False))
+    w = WarmStart.of(sol, prob.stage_dt, carry_rho=False)
+    np.testing.assert_array_equal(w.U, sol.U)
+    assert w.duals is sol.duals and w.rho is None and w.maps is sol.stage_maps
+    other = WarmStart.of(sol, prob.stage_dt * 2, carry_rho=True)
+    assert other.maps is None and other.rho == sol.rho
+    assert WarmStart.of(w, prob.stage_dt, True) is w
+    again = solve(prob, w, method="dyn", options=case_options(case, False))
+    assert again.converged and again.cost == pytest.approx(sol.cost, rel=1e-9)

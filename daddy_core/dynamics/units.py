@@ -93,26 +93,21 @@ class Units:
     def states_si(self, X) -> np.ndarray:
         """Normalised states (..., nx) -> SI: Cartesian [position m, velocity m/s, mass kg];
         equinoctial [a m, p, q, r, s, L rad, mass kg] (the elements p..L are dimensionless)."""
-        X = np.array(X, dtype=float)
-        if self.name in CARTESIAN_SYSTEMS:
-            X[..., :3] = self.length_m(X[..., :3])
-            X[..., 3:6] = self.speed_m_s(X[..., 3:6])
-        else:
-            X[..., 0] = self.length_m(X[..., 0])
-        if X.shape[-1] == 7:
-            X[..., 6] = self.mass_kg(X[..., 6])
-        return X
+        return self._convert_states(X, self.length_m, self.speed_m_s, self.mass_kg)
 
     def states_normalised(self, X_si) -> np.ndarray:
         """The inverse of ``states_si``."""
-        X = np.array(X_si, dtype=float)
+        return self._convert_states(X_si, self.length, self.speed, self.mass)
+
+    def _convert_states(self, X, length, speed, mass) -> np.ndarray:
+        X = np.array(X, dtype=float)
         if self.name in CARTESIAN_SYSTEMS:
-            X[..., :3] = self.length(X[..., :3])
-            X[..., 3:6] = self.speed(X[..., 3:6])
+            X[..., :3] = length(X[..., :3])
+            X[..., 3:6] = speed(X[..., 3:6])
         else:
-            X[..., 0] = self.length(X[..., 0])
+            X[..., 0] = length(X[..., 0])
         if X.shape[-1] == 7:
-            X[..., 6] = self.mass(X[..., 6])
+            X[..., 6] = mass(X[..., 6])
         return X
 
     def as_dict(self) -> dict:
