@@ -271,16 +271,30 @@ def backward_sweep(st: Stages, sweep: Sweep, rho: float) -> Gains | None:
 
 
 # ----------------------------------------------------------------------------- forward passes
-def forward_pass(st: Stages, gains: Gains, alpha: float, dyn: bool):
-    """Roll the feedback law out for step length alpha (Alg. 6 / Alg. 8): stage k is served by
-    its stored map where [dx; du] lies inside the map's radius (Dyn, eq. 11), else integrated.
+@dataclass
+class Trial:
+    """One forward pass (a candidate nominal).
 
-    Returns:
-        X* (N+1, nx), U* (N, nu), poly (N,) bool: stage propagated by the stored map,
-        dz (n, N): the stage deviations [dx; du] from the nominal, ok: every state finite and
-        every mass positive (a stage that fails either ends the pass: thrust / mass has no
-        meaning beyond, and a trajectory whose mass went negative does not recover).
+    Attributes:
+        X: (N+1, nx), U: (N, nu) the new trajectory; poly: (N,) bool, stage propagated by its
+        stored map; dz: (n, N) the stage deviations [dx; du] from the nominal; ok: every state
+        finite and every mass positive (a stage that fails either ends the pass: thrust / mass
+        has no meaning beyond, and a trajectory whose mass went negative does not recover);
+        alpha: its step length; cost: its augmented cost (set by the line search).
     """
+
+    X: np.ndarray
+    U: np.ndarray
+    poly: np.ndarray
+    dz: np.ndarray
+    ok: bool
+    alpha: float
+    cost: float = math.nan
+
+
+def forward_pass(st: Stages, gains: Gains, alpha: float, dyn: bool) -> Trial:
+    """Roll the feedback law out for step length alpha (Alg. 6 / Alg. 8): stage k is served by
+    its stored map where [dx; du] lies inside the map's radius (Dyn, eq. 11), else integrated."""
     p = st.problem
     N, nx, nu = p.N, p.nx, p.nu
     X = np.empty((N + 1, nx))
@@ -302,20 +316,21 @@ def forward_pass(st: Stages, gains: Gains, alpha: float, dyn: bool):
             try:
                 X[k + 1] = p.stage_flow(X[k], U[k], k)
             except (DaddyError, FloatingPointError, OverflowError):
-                return X, U, poly, dz, False
+                return Trial(X, U, poly, dz, False, alpha)
         if not math.isfinite(X[k + 1].sum()) or (im is not None and X[k + 1, im] <= 0.0):
-            return X, U, poly, dz, False
-    return X, U, poly, dz, True
+            return Trial(X, U, poly, dz, False, alpha)
+    return Trial(X, U, poly, dz, True, alpha)
 
 
-def new_maps(st: Stages, X, U, poly, dz, dyn: bool) -> da.DA:
+def new_maps(st: Stages, trial: Trial, dyn: bool) -> da.DA:
     """Stage maps at the new nominal: one batched expansion of the integrated stages and one
     batched re-centring (composition) of the stages served by their polynomial. The forward
     pass integrated X[k+1] from (X[k], U[k]) wherever stage k is re-expanded: those flows are
     the expansions' constant parts (not integrated twice)."""
+    X, U = trial.X, trial.U
     if not dyn:
         return expand_dynamics(st.problem, X[:-1], U, st.problem.stage_dt, values=X[1:].T)
-    return maps_at(st.problem, st.F, dz, poly, X, U, values=X[1:].T)
+    return maps_at(st.problem, st.F, trial.dz, trial.poly, X, U, values=X[1:].T)
 
 
 # ----------------------------------------------------------------------------------- the loop
@@ -366,22 +381,23 @@ def _sweep(st: Stages, sweep: Sweep, rho: float, stats: DDPStats) -> Gains | Non
     return gains
 
 
-def _line_search(st: Stages, gains: Gains, a0: float, dyn: bool, opts: SolverOptions, J: float):
+def _line_search(st: Stages, gains: Gains, a0: float, dyn: bool, opts: SolverOptions,
+                 J: float) -> Trial | None:
     """Backtracking from step a0 (one step length at a time): the first step whose actual /
     expected decrease lies in (ls_min_ratio, ls_max_ratio), or that decreases the cost where
-    the expected decrease is round-off. Returns (alpha, X, U, poly, dz, Jn) or None."""
+    the expected decrease is round-off. Returns that trial (with its cost) or None."""
     p = st.problem
     for a in a0 * opts.ls_shrink ** np.arange(opts.ls_max_halvings + 1):
-        X, U, poly, dz, ok = forward_pass(st, gains, a, dyn)
-        if not ok:
+        trial = forward_pass(st, gains, a, dyn)
+        if not trial.ok:
             continue
-        Jn = augmented_cost(p, X, U, st.mult, st.hom)
+        Jn = trial.cost = augmented_cost(p, trial.X, trial.U, st.mult, st.hom)
         expected = -(a * gains.dv1 + a * a * gains.dv2)
         actual = J - Jn
         if np.isfinite(Jn) and (
                 (expected > 0 and opts.ls_min_ratio < actual / expected < opts.ls_max_ratio)
                 or (expected <= 1e-15 * max(1.0, abs(J)) and actual >= 0)):
-            return a, X, U, poly, dz, Jn
+            return trial
     return None
 
 
@@ -425,13 +441,13 @@ def ddp(st: Stages, method: Method, opts: SolverOptions, stats: DDPStats,
             if rho > opts.rho_max:
                 return result(False, it, Status.LINE_SEARCH_FAILED)
             continue
-        a, X, U, poly, dz, Jn = step
+        a, Jn = step.alpha, step.cost
         stats.iterations += 1
         stats.stages_total += p.N
-        stats.stages_polynomial += int(poly.sum())
+        stats.stages_polynomial += int(step.poly.sum())
         t0 = time.perf_counter()
-        F = new_maps(st, X, U, poly, dz, method.dyn)
-        st = Stages(p, X, U, st.mult, st.hom, st.eps_da, F=F)
+        F = new_maps(st, step, method.dyn)
+        st = Stages(p, step.X, step.U, st.mult, st.hom, st.eps_da, F=F)
         stats.expansion_s += time.perf_counter() - t0
         rel = (J - Jn) / max(abs(J), 1e-300)
         J = st.cost
