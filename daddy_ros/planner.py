@@ -137,15 +137,17 @@ class GuidancePlanner:
         """Solve and assess; a polished result that is not safe (polishing an infeasible
         problem can push the thrust past its bound) falls back to the unpolished DDP result,
         which keeps the bound and minimises the terminal miss."""
-        sol = solve(problem, start, method=self.method, fuel_optimal=None,
-                    polish=self.config.polish, options=opts, case_name=self.case.name)
-        verdict = assess(sol, problem, self._feasibility_tol)
-        if not verdict.safe and self.config.polish:
-            U = verdict.U if np.all(np.isfinite(verdict.U)) else start.U
-            sol = solve(problem, U, method=self.method, fuel_optimal=None, polish=False,
-                        options=opts, case_name=self.case.name)
-            verdict = assess(sol, problem, self._feasibility_tol)
-        return _Attempt(sol, problem, verdict)
+        best = self._attempt(problem, start, opts, self.config.polish)
+        if not best.verdict.safe and self.config.polish:
+            U = best.verdict.U if np.all(np.isfinite(best.verdict.U)) else start.U
+            best = self._attempt(problem, U, opts, polish=False)
+        return best
+
+    def _attempt(self, problem: Problem, guess, opts, polish: bool) -> _Attempt:
+        """One solve of ``problem`` from ``guess`` (controls or a WarmStart), assessed."""
+        sol = solve(problem, guess, method=self.method, fuel_optimal=None, polish=polish,
+                    options=opts, case_name=self.case.name)
+        return _Attempt(sol, problem, assess(sol, problem, self._feasibility_tol))
 
     def _climb(self, best: _Attempt, rung: int, U_guess: np.ndarray, opts) -> _Attempt:
         """The thrust-margin ladder: while the target is out of reach, give up the next part
@@ -157,19 +159,18 @@ class GuidancePlanner:
             rated = self._rated(best.problem, rung)
             safe = best.verdict.safe
             try:
-                sol = solve(rated, best.verdict.U if safe else U_guess, method=self.method,
-                            fuel_optimal=None, polish=self.config.polish, options=opts,
-                            case_name=self.case.name)
-                v = assess(sol, rated, self._feasibility_tol)
+                trial = self._attempt(rated, best.verdict.U if safe else U_guess, opts,
+                                      self.config.polish)
             except Exception as exc:  # noqa: BLE001  a solver fault on this rung: try the next
                 best = replace(best, failed_rungs=best.failed_rungs + (
                     f"rung {rung}: {type(exc).__name__}: {exc}",))
                 continue
+            v = trial.verdict
             if v.safe and (v.feasible or not safe or v.miss < best.verdict.miss):
                 # more thrust hardly reduced the miss: what is left is not a thrust deficit
                 # (e.g. navigation error in the last minutes); stop climbing
                 stalled = safe and not v.feasible and v.miss > LADDER_MIN_GAIN * best.verdict.miss
-                best = _Attempt(sol, rated, v, best.failed_rungs)
+                best = replace(trial, failed_rungs=best.failed_rungs)
                 if stalled:
                     break
         return best
