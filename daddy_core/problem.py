@@ -204,6 +204,55 @@ class Problem:
         """State (nx,) after stage k from x (nx,) under u (nu,), in floats."""
         return self.step.flow(x, u, float(self.stage_dt[k]))
 
+    def check_guess(self, U0) -> np.ndarray:
+        """Check the initial guess and that every problem function returns finite values of the
+        right shape at it, before any iteration. Returns U0 as a float (N, nu) array."""
+        N, nu, nx = self.N, self.nu, self.nx
+        try:
+            raw = np.asarray(U0)
+            if raw.dtype.kind not in "iuf":   # no silent casts of complex, bool, text or objects
+                raise TypeError(f"dtype {raw.dtype}")
+            U0 = raw.astype(float)
+        except (TypeError, ValueError) as exc:
+            raise DaddyError(f"u_guess must be a real numeric array of shape (N, nu) = "
+                             f"({N}, {nu}): {exc}") from exc
+        if U0.shape != (N, nu):
+            raise DaddyError(f"u_guess must have shape (N, nu) = ({N}, {nu}), got {U0.shape}")
+        if not np.all(np.isfinite(U0)):
+            raise DaddyError("u_guess contains NaN or inf")
+        if self.spacecraft is not None and self.mass_index is not None:
+            m = self.x0[self.mass_index] * self.units.mu_kg
+            if m <= self.spacecraft.dry_mass_kg:
+                raise DaddyError(f"x0 mass ({m:.6g} kg) must exceed the dry mass "
+                                 f"({self.spacecraft.dry_mass_kg:.6g} kg)")
+        x = np.tile(self.x0[:, None], (1, 2))
+        u = U0[:2].T if N >= 2 else np.tile(U0[0][:, None], (1, 2))
+        dt = self.stage_dt[:2] if N >= 2 else np.repeat(self.stage_dt, 2)
+        checks = {
+            "step": lambda: self.step(x, u, dt),
+            "stage_cost": lambda: self.stage_cost(x, u, dt, (0.0, 1.0)),
+            "path constraints": lambda: self.path_constraints(x, u, dt)[0],
+            "terminal_cost": lambda: self.terminal_cost(self.x0, self.x_target),
+            "terminal constraints": lambda: self.terminal_constraints(self.x0)[0],
+        }
+        shapes = {"step": (nx, 2), "stage_cost": (2,)}
+        for name, fn in checks.items():
+            try:
+                val = fn()
+            except DaddyError:
+                raise
+            except Exception as exc:  # a user function failing is reported as bad input
+                raise DaddyError(f"problem {name} raised {type(exc).__name__}: {exc}") from exc
+            if val is None:
+                continue
+            val = np.asarray(val, dtype=float)
+            if name in shapes and val.shape != shapes[name]:
+                raise DaddyError(f"problem {name} returned shape {val.shape}, expected "
+                                 f"{shapes[name]}")
+            if not np.all(np.isfinite(val)):
+                raise DaddyError(f"problem {name} returned NaN or inf at the initial guess")
+        return U0
+
     # -- constraint violation (floats) -----------------------------------------------------
     def constraint_values(self, X: np.ndarray, U: np.ndarray):
         """Path constraints (n_c, N) and terminal constraints (n_t,) of a trajectory X
