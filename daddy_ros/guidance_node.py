@@ -106,8 +106,8 @@ class GuidanceNode(Node):
         start-up. A rejected update changes nothing."""
         why = next((r for r in map(self._parameter_problem, params) if r), None)
         if why:
-            self._diag(Level.WARN,
-                f"parameter update rejected: {why}", {"field": "parameters"}, None)
+            self._diag(Level.WARN, f"parameter update rejected: {why}", {"field": "parameters"},
+                       None)
             return SetParametersResult(successful=False, reason=why)
         self.planner.update(**{p.name: p.value for p in params if p.name in RUNTIME})
         return SetParametersResult(successful=True)
@@ -130,8 +130,8 @@ class GuidanceNode(Node):
     # ------------------------------------------------------------------ inputs
     def _reject(self, topic: str, reason: str, stamp: float) -> None:
         """An input that is not used: ERROR diagnostic naming the field; nothing else changes."""
-        self._diag(Level.ERROR,
-            f"input rejected: {reason}", {"topic": topic, "stamp_s": f"{stamp:.9f}"},
+        self._diag(Level.ERROR, f"input rejected: {reason}",
+                   {"topic": topic, "stamp_s": f"{stamp:.9f}"},
                    stamp if math.isfinite(stamp) and stamp > 0 else None, log_every_s=1.0)
 
     def _on_state(self, msg: Odometry):
@@ -173,13 +173,13 @@ class GuidanceNode(Node):
         try:
             plan = self.planner.restore_plan(self.persist_file)
         except DaddyError as exc:
-            self._diag(Level.ERROR,
-                f"persist_file not restored: {exc}", {"field": "persist_file"}, None)
+            self._diag(Level.ERROR, f"persist_file not restored: {exc}", {"field": "persist_file"},
+                       None)
             return
         self._publish_plan(plan, None)
         self._replan_on_first_estimate = True
         self._diag(Level.WARN,
-            f"restored the persisted plan (epoch {plan.epoch_s:.3f} s); re-planning "
+                   f"restored the persisted plan (epoch {plan.epoch_s:.3f} s); re-planning "
                    "at the first estimate", {"request_id": "restored"}, plan.epoch_s)
 
     def _persist(self) -> str:
@@ -207,9 +207,8 @@ class GuidanceNode(Node):
             return None
         self._publish_plan(plan, stamp)
         self._persist()
-        self._diag(Level.OK,
-            f"adopted nominal plan {Path(plan_file).name}", {"request_id": "nominal"},
-                   stamp)
+        self._diag(Level.OK, f"adopted nominal plan {Path(plan_file).name}",
+                   {"request_id": "nominal"}, stamp)
         return plan
 
     def _on_request(self, msg: Header):
@@ -242,14 +241,14 @@ class GuidanceNode(Node):
         try:
             state = self.queue.state_for(request_stamp)
         except InputRejected as exc:
-            self._finish(request_id,
-                None, Level.ERROR, f"input rejected: {exc}", request_stamp, started)
+            self._finish(request_id, None, Level.ERROR, f"input rejected: {exc}", request_stamp,
+                         started)
             return
         now = request_stamp if request_stamp is not None else (state.stamp_s if state else None)
         mass = None if state is None else self.queue.mass_for(state.stamp_s)
         if state is None or mass is None:
-            self._finish(request_id,
-                None, Level.ERROR, "no valid state_estimate and mass_estimate yet",
+            self._finish(request_id, None, Level.ERROR,
+                         "no valid state_estimate and mass_estimate yet",
                          now, started)
             return
         pos, vel, stamp = state.pos_m, state.vel_m_s, state.stamp_s

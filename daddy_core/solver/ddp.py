@@ -76,7 +76,7 @@ class Stages:
         self.hom = hom
         self.eps_da = eps_da
         self.F = F if F is not None else expand_dynamics(problem, self.X[:-1], self.U,
-                                                                 problem.stage_dt)
+                                                         problem.stage_dt)
         self.radius = da.radius(self.F, eps_da)
         self._expand_costs()
 
