@@ -18,7 +18,7 @@ from typing import Callable, Optional
 import numpy as np
 
 from .da import functions as dm
-from .da.core import DA
+from .da.core import DA, variables
 from .dynamics.units import Spacecraft, Units, unit_units
 from .errors import DaddyError
 from .dynamics.rhs import Dynamics, as_dynamics
@@ -50,6 +50,11 @@ class StageStep:
         F.c[0] = values
         return F
 
+    def probe(self, x: DA, u: DA, dt: np.ndarray):
+        """The user code behind the step evaluated once on DA (x (nx, B), u (nu, B)): shows
+        whether it runs on DA and returns (nx, B) (``Problem.check_guess``)."""
+        return self(x, u, dt)
+
 
 class FlowStep(StageStep):
     """The flow of a ``Dynamics`` over a stage, integrated by RK78 or RK4 (see ``flow_step``)."""
@@ -69,6 +74,10 @@ class FlowStep(StageStep):
             return self._expand_rk78(x, u, dt, None)
         # every integration first tries the whole stage (h0 = dt): most stages need one step
         return rk78(self.rhs, x, u, 0.0, dt, tol=self.tol, h0=dt)
+
+    def probe(self, x, u, dt):
+        # the integrators are ours: the user code is the right-hand side, one call is enough
+        return self.rhs(0.0, x, u)
 
     def flow(self, x, u, dt):
         if self.integrator == "rk4":
@@ -251,7 +260,29 @@ class Problem:
                                  f"{shapes[name]}")
             if not np.all(np.isfinite(val)):
                 raise DaddyError(f"problem {name} returned NaN or inf at the initial guess")
+        self._check_on_da(U0[0])
         return U0
+
+    def _check_on_da(self, u0: np.ndarray) -> None:
+        """Evaluate every problem function once on DA at (x0, u0), one stage: the solver expands
+        them all, and a function written for floats only (a numpy ufunc, ``np.stack``, a list, a
+        bare expression where a vector is due) fails here with a DaddyError naming it and the
+        fix, not later inside the solver."""
+        nx = self.nx
+        z = variables(np.concatenate([self.x0, u0])[:, None], order=2)
+        x, u, dt = z[:nx], z[nx:], self.stage_dt[:1]
+        xn = variables(self.x0, order=2)
+        xt = self.x_target
+        stage = [("step", lambda: self.step.probe(x, u, dt), (nx, 1)),
+                 ("stage_cost", lambda: self.stage_cost(x, u, dt, (0.0, 1.0)), (1,)),
+                 ("g_ineq", self.g_ineq and (lambda: self.g_ineq(x, u, dt)), (None, 1)),
+                 ("g_eq", self.g_eq and (lambda: self.g_eq(x, u, dt)), (None, 1)),
+                 ("terminal_cost", lambda: self.terminal_cost(xn, xt), ()),
+                 ("g_tineq", self.g_tineq and (lambda: self.g_tineq(xn, xt)), (None,)),
+                 ("g_teq", self.g_teq and (lambda: self.g_teq(xn, xt)), (None,))]
+        for name, fn, shape in stage:
+            if fn:
+                _check_da_value(name, fn, shape)
 
     # -- constraint violation (floats) -----------------------------------------------------
     def constraint_values(self, X: np.ndarray, U: np.ndarray):
@@ -270,6 +301,36 @@ class Problem:
         """Max violation of the terminal constraints at the final state x (nx,)."""
         gt, nti = self.terminal_constraints(x)
         return max_violation(gt, nti)
+
+
+_DA_HINT = ("write it with daddy_core.da.functions (dm.sqrt, dm.sin, dm.stack, ...) instead of "
+            "numpy's functions, which do not take DA values")
+
+
+def _check_da_value(name: str, fn: Callable, shape: tuple) -> None:
+    """Call ``fn`` on DA inputs; raise a DaddyError naming ``name`` unless it returns a DA (or a
+    constant float array) of ``shape`` (None: any length on that axis)."""
+    try:
+        val = fn()
+    except DaddyError:
+        raise
+    except Exception as exc:   # the function does not run on DA
+        raise DaddyError(f"problem {name} raised {type(exc).__name__} on DA inputs ({exc}): "
+                         f"{_DA_HINT}") from exc
+    if isinstance(val, (list, tuple)):
+        raise DaddyError(f"problem {name} returned a {type(val).__name__}: return "
+                         "dm.stack([...]) of its components")
+    if isinstance(val, np.ndarray) and val.dtype == object:
+        raise DaddyError(f"problem {name} returned a numpy object array (np.stack / np.array of "
+                         f"DA values): {_DA_HINT}")
+    got = tuple(np.shape(val)) if not isinstance(val, DA) else val.shape
+    if len(got) != len(shape) or any(w is not None and g != w for g, w in zip(got, shape)):
+        want = "(" + ", ".join("n" if w is None else str(w) for w in shape) + \
+            ("," if len(shape) == 1 else "") + ")"
+        fix = (" (a single constraint: dm.stack([g]))" if None in shape
+               and len(got) == len(shape) - 1 else "")
+        raise DaddyError(f"problem {name} returned shape {got} on DA inputs, expected {want}"
+                         f"{fix}")
 
 
 def max_violation(g, n_ineq: int) -> float:

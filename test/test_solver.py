@@ -303,3 +303,53 @@ def test_a_warm_start_object_carries_what_a_solution_lends():
     assert WarmStart.of(w, prob.stage_dt, True) is w
     again = solve(prob, w, method="dyn", options=case_options(case, False))
     assert again.converged and again.cost == pytest.approx(sol.cost, rel=1e-9)
+
+
+def _landing(**kw):
+    """A 1-D landing written as a new user would, with one function replaced by ``kw``."""
+    from daddy_core.da import functions as dm
+    from daddy_core.problem import flow_step
+
+    def rhs(t, x, u):
+        return dm.stack([x[1], u[0] / x[2] - 1.62, -u[0] / 3000.0])
+
+    fields = dict(name="landing", nu=1, x0=np.array([1500.0, -30.0, 10.0]),
+                  x_target=np.zeros(3), stage_dt=np.full(10, 2.0),
+                  step=flow_step(rhs, "rk4", rk4_steps=2),
+                  stage_cost=lambda x, u, dt, hom: u[0] * u[0],
+                  terminal_cost=lambda x, xt: -x[2],
+                  g_ineq=lambda x, u, dt: dm.stack([u[0] - 45.0, -u[0]]),
+                  g_teq=lambda x, xt: x[:2] - xt[:2])
+    fields.update(kw)
+    return Problem(**fields)
+
+
+@pytest.mark.parametrize("mistake, field, hint", [
+    ("np.sqrt in the rhs", "step", "dm.sqrt"),
+    ("np.stack in the rhs", "step", "dm.stack"),
+    ("a list from g_teq", "g_teq", r"dm.stack\(\[\.\.\.\]\)"),
+    ("a bare expression from g_ineq", "g_ineq", "shape"),
+    ("np.sin in the stage cost", "stage_cost", "dm.sin"),
+])
+def test_functions_written_for_floats_only_are_named_before_any_iteration(mistake, field, hint):
+    """Every problem function runs once on DA at the initial guess: a first mistake that works on
+    floats but not on DA is a DaddyError naming the function and the fix, not a raw exception
+    from inside the solver."""
+    from daddy_core.da import functions as dm
+    from daddy_core.problem import flow_step
+    bad = {
+        "np.sqrt in the rhs": dict(step=flow_step(
+            lambda t, x, u: dm.stack([x[1], np.sqrt(u[0] * u[0]) / x[2] - 1.62, -u[0] / 3e3]),
+            "rk4", rk4_steps=2)),
+        "np.stack in the rhs": dict(step=flow_step(
+            lambda t, x, u: np.stack([x[1], u[0] / x[2] - 1.62, -u[0] / 3000.0]), "rk4",
+            rk4_steps=2)),
+        "a list from g_teq": dict(g_teq=lambda x, xt: [x[0] - xt[0], x[1] - xt[1]]),
+        "a bare expression from g_ineq": dict(g_ineq=lambda x, u, dt: u[0] - 45.0),
+        "np.sin in the stage cost": dict(stage_cost=lambda x, u, dt, hom: np.sin(u[0]) ** 2),
+    }[mistake]
+    good = _landing()
+    U0 = np.full((10, 1), 16.0)
+    good.check_guess(U0)                        # the well-written problem passes
+    with pytest.raises(DaddyError, match=f"problem {field}.*{hint}"):
+        solve(_landing(**bad), U0)
