@@ -353,3 +353,51 @@ def test_functions_written_for_floats_only_are_named_before_any_iteration(mistak
     good.check_guess(U0)                        # the well-written problem passes
     with pytest.raises(DaddyError, match=f"problem {field}.*{hint}"):
         solve(_landing(**bad), U0)
+
+
+def _rest_to_rest(stage_cost=None):
+    """Move 10 m from rest to rest in 10 s with |u| <= 1 m/s^2 (exact zero-order hold)."""
+    from daddy_core.da import functions as dm
+    from daddy_core.fuel import pseudo_huber_stage_cost
+    N, dt = 20, 0.5
+
+    def step(x, u, dt):
+        return dm.stack([x[0] + x[1] * dt + u[0] * (0.5 * dt * dt), x[1] + u[0] * dt])
+
+    return Problem(name="rest_to_rest", nu=1, x0=np.zeros(2), x_target=np.array([10.0, 0.0]),
+                   stage_dt=np.full(N, dt), step=step,
+                   stage_cost=stage_cost or pseudo_huber_stage_cost(u_max=1.0, dt_ref=dt),
+                   terminal_cost=lambda x, xt: x[0] * 0.0,
+                   g_ineq=lambda x, u, dt: dm.stack([u[0] * u[0] - 1.0]),
+                   g_teq=lambda x, xt: x - xt, u_max=1.0)
+
+
+def test_fuel_optimal_user_problem_runs_the_default_homotopy_to_the_lp_optimum():
+    """fuel_optimal=True on a user problem with default options runs fuel.FUEL_HOMOTOPY on the
+    library's pseudo-Huber cost; the propellant lands on the optimum of the same discrete
+    problem solved independently as a linear program (scipy linprog), within the smoothing of
+    the last step (delta = 1e-3)."""
+    from scipy.optimize import linprog
+
+    from daddy_core.fuel import FUEL_HOMOTOPY
+    prob = _rest_to_rest()
+    sol = solve(prob, np.zeros((prob.N, 1)), fuel_optimal=True)
+    assert sol.converged and sol.fuel_optimal and sol.max_violation <= 1e-10
+    assert [(h["h"], h["delta"]) for h in sol.history] == list(FUEL_HOMOTOPY)
+    dt = prob.stage_dt[0]
+    fuel = float(np.sum(np.abs(sol.U[:, 0])) * dt)
+    k = np.arange(prob.N)
+    effect = np.vstack([dt * dt * (prob.N - k - 0.5), np.full(prob.N, dt)])  # on x_N, v_N
+    lp = linprog(np.full(2 * prob.N, dt), A_eq=np.hstack([effect, -effect]), b_eq=[10.0, 0.0],
+                 bounds=[(0, 1.0)] * (2 * prob.N))
+    assert lp.status == 0
+    assert lp.fun - 1e-9 <= fuel <= lp.fun * (1 + 2e-3)
+    energy = solve(prob, np.zeros((prob.N, 1)), fuel_optimal=False)
+    assert not energy.fuel_optimal and float(np.sum(np.abs(energy.U)) * dt) > fuel * 1.05
+
+
+def test_fuel_optimal_with_a_stage_cost_that_ignores_the_homotopy_is_an_error():
+    prob = _rest_to_rest(stage_cost=lambda x, u, dt, hom: u[0] * u[0])
+    with pytest.raises(DaddyError, match="stage_cost ignores its hom"):
+        solve(prob, np.zeros((prob.N, 1)), fuel_optimal=True)
+    assert solve(prob, np.zeros((prob.N, 1)), fuel_optimal=False).converged

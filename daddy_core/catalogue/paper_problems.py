@@ -7,6 +7,7 @@ import numpy as np
 
 from ..da import functions as dm
 from ..errors import DaddyError
+from ..fuel import pseudo_huber_stage_cost
 from ..problem import Problem, flow_step
 from .cases import Case
 
@@ -15,22 +16,11 @@ def low_thrust_costs(n_pos: int, u_max: float, dt_avg: float, stage_gain: float,
                      terminal_gain: float):
     """Paper/reference-code costs for low-thrust transfers.
 
-    Stage cost (eq. 14 with the reference's scaling): with w = u dt / (dt_avg u_max),
-        l = (1 - h) * gain/2 * |w|^2 + h * gain * delta * (sqrt(1 + |w|^2 / delta^2) - 1);
-    h = 0 is energy-optimal, and as delta -> 0 the second term tends to gain * |w| (fuel).
+    Stage cost (eq. 14 with the reference's scaling): ``fuel.pseudo_huber_stage_cost`` with
+    w = u dt / (dt_avg u_max), h = 0 energy-optimal, delta -> 0 fuel-optimal.
     Terminal cost: terminal_gain / 2 * |x[:n_pos] - x_t[:n_pos]|^2.
     """
-    scale = 1.0 / (dt_avg * u_max)
-
-    def stage_cost(x, u, dt, hom=(0.0, 1.0)):
-        h, delta = hom
-        s = dt * scale
-        w2 = (u[0] * u[0] + u[1] * u[1] + u[2] * u[2]) * (s * s)
-        energy = w2 * (0.5 * stage_gain)
-        if h == 0.0:
-            return energy
-        huber = (dm.sqrt(w2 * (1.0 / (delta * delta)) + 1.0) - 1.0) * (stage_gain * delta)
-        return energy * (1.0 - h) + huber * h
+    stage_cost = pseudo_huber_stage_cost(u_max, dt_avg, stage_gain)
 
     def terminal_cost(x, xt):
         e = x[:n_pos] - xt[:n_pos]

@@ -10,6 +10,8 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from ..errors import DaddyError
+from ..fuel import FUEL_HOMOTOPY
 from ..problem import Problem
 from .aul import aul
 from .ddp import DDPStats, Gains, Stages
@@ -43,12 +45,34 @@ class HomotopyResult:
     reason: str = "converged"
 
 
-def homotopy_steps(opts: SolverOptions, fuel_optimal: bool | None) -> tuple:
-    """The (h, delta) steps to run: all of ``opts.homotopy`` for a fuel-optimal solve (None:
-    when it has more than one step), else its first, energy-optimal step."""
-    if fuel_optimal or (fuel_optimal is None and len(opts.homotopy) > 1):
-        return opts.homotopy
-    return opts.homotopy[:1]
+def homotopy_steps(problem: Problem, U0: np.ndarray, opts: SolverOptions,
+                   fuel_optimal: bool | None) -> tuple:
+    """The (h, delta) steps to run.
+
+    fuel_optimal None: all of ``opts.homotopy`` when it has more than one step, else its
+    first; False: its first (energy-optimal) step only; True: all of it, or
+    ``fuel.FUEL_HOMOTOPY`` when the options name only the energy step -- never silently the
+    energy problem: a stage cost that ignores ``hom`` (same value at the guess with the first
+    and the last step's (h, delta)) is a DaddyError saying what is missing.
+    """
+    hom = opts.homotopy
+    if fuel_optimal is None:
+        return hom if len(hom) > 1 else hom[:1]
+    if not fuel_optimal:
+        return hom[:1]
+    steps = hom if (len(hom) > 1 or hom[0][0] > 0) else FUEL_HOMOTOPY
+    x = np.tile(problem.x0[:, None], (1, 2))
+    u = np.asarray(U0[:2], float).T + 1.0     # any non-zero thrust: the fuel term differs there
+    dt = np.resize(problem.stage_dt, 2)
+    first, last = (np.asarray(problem.stage_cost(x, u, dt, step), float)
+                   for step in ((0.0, steps[0][1]), steps[-1]))
+    if np.array_equal(first, last):
+        raise DaddyError("fuel_optimal=True, but problem stage_cost ignores its hom = (h, delta) "
+                         "argument (same value for h = 0 and h = "
+                         f"{steps[-1][0]:g}): blend the fuel term by h, e.g. "
+                         "daddy_core.fuel.pseudo_huber_stage_cost, or solve with "
+                         "fuel_optimal=False")
+    return steps
 
 
 def continuation(problem: Problem, X, U, steps: tuple, method: Method, opts: SolverOptions,

@@ -105,8 +105,10 @@ def solve(problem: Problem, u_guess=None, method: Method | str = Method.DYN,
         u_guess: (N, nu) initial controls, a ``Solution`` to warm-start from, or a
             ``WarmStart`` (controls, duals, rho, stage maps); None: 1e-6 everywhere.
         method: a ``Method`` or its name: std, hess, q, dyn, hessdyn, qdyn (paper Table 1).
-        fuel_optimal: run the whole homotopy of ``options.homotopy`` (True) or only its first,
-            energy-optimal step (False). None: True when the homotopy has more than one step.
+        fuel_optimal: run the whole homotopy of ``options.homotopy`` (True; the default
+            ``fuel.FUEL_HOMOTOPY`` when the options name only the energy step, and a DaddyError
+            when the stage cost ignores ``hom``) or only its first, energy-optimal step
+            (False). None: the whole homotopy when it has more than one step.
         polish: finish with the Newton polishing (Alg. 11) to ``options.tol_newton``.
         options: ``SolverOptions``.
         progress: callable receiving progress lines (or None; ``options.verbose``: print).
@@ -118,7 +120,7 @@ def solve(problem: Problem, u_guess=None, method: Method | str = Method.DYN,
     method = Method.parse(method)
     warm = WarmStart.of(u_guess, problem.stage_dt, opts.carry_rho)
     U0 = problem.check_guess(np.full((problem.N, problem.nu), 1e-6) if warm.U is None else warm.U)
-    steps = homotopy_steps(opts, fuel_optimal)
+    steps = homotopy_steps(problem, U0, opts, fuel_optimal)
     if progress is None and opts.verbose:
         progress = print
     clock = _Clock(opts.time_budget_s)
