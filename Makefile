@@ -18,7 +18,7 @@ export ROS_DOMAIN_ID ?= $(shell echo $$(( $$$$ % 100 + 100 )))
 export ROS_LOG_DIR ?= $(shell mktemp -d /tmp/daddy-roslog.XXXXXX)
 export ROS_PYTHON_CHECK_FIELDS := 1
 
-.PHONY: demo test test-slow bench monte-carlo reliability venv clean
+.PHONY: demo test test-slow bench monte-carlo reliability robustness venv clean
 
 venv: $(STAMP)
 
@@ -57,6 +57,13 @@ monte-carlo: $(STAMP)
 
 reliability: $(STAMP)
 	cd test && ../$(PY) -m reliability $(if $(QUICK),--quick)
+
+# random initial guesses per case (bench/bench_robustness.py): GUESSES per case, CAP s per solve
+robustness: $(STAMP)
+	cd bench && for c in double_integrator earth_mars dro_dro; do \
+	  ../$(PY) bench_robustness.py $$c --guesses $(or $(GUESSES),100) --cap $(or $(CAP),60) || exit 1; done; \
+	for c in halo_l2_l1 lyapunov_l1_l2; do \
+	  ../$(PY) bench_robustness.py $$c --guesses $(or $(CR3BP_GUESSES),30) --cap $(or $(CAP),60) || exit 1; done
 
 bench: $(STAMP)
 	cd bench && ../$(PY) bench_da.py && ../$(PY) bench_solver.py && ../$(PY) bench_replan.py
