@@ -372,11 +372,15 @@ def _predicted_stop(st: Stages, full_step_gain: float, it: int, opts: SolverOpti
 
 def _sweep(st: Stages, sweep: Sweep, rho: float, stats: DDPStats) -> Gains | None:
     """A backward sweep; far from the optimum the dynamics-Hessian terms can make Q_uu
-    indefinite through V_xx, and the Gauss-Newton (Std) sweep at the same rho is taken instead."""
+    indefinite through V_xx, and the Gauss-Newton (Std) sweep at the same rho is taken
+    instead."""
     t0 = time.perf_counter()
-    gains = backward_sweep(st, sweep, rho)
-    if gains is None and sweep is not Sweep.STD:
-        gains = backward_sweep(st, Sweep.STD, rho)
+    # a diverging iterate overflows Q to inf / nan: the regularised inverse rejects it (rho is
+    # raised), so numpy's warnings would only be noise on the user's terminal
+    with np.errstate(over="ignore", invalid="ignore"):
+        gains = backward_sweep(st, sweep, rho)
+        if gains is None and sweep is not Sweep.STD:
+            gains = backward_sweep(st, Sweep.STD, rho)
     stats.backward_s += time.perf_counter() - t0
     return gains
 
