@@ -297,6 +297,27 @@ class Problem:
         g, ni, gt, nti = self.constraint_values(X, U)
         return max(max_violation(g, ni), max_violation(gt, nti))
 
+    def violation_report(self, X: np.ndarray, U: np.ndarray) -> list[dict]:
+        """Every constraint's largest violation on (X, U), largest first: {"name" (e.g.
+        "g_ineq[0]", "g_teq[2]"), "violation", "stage" (of the largest, path constraints; None
+        for terminal ones)}. Says which constraints a failed solve could not meet."""
+        g, ni, gt, nti = self.constraint_values(X, U)
+        out = []
+        if g is not None:
+            v = np.abs(np.asarray(g, dtype=float))
+            v[:ni] = np.maximum(np.asarray(g, dtype=float)[:ni], 0.0)
+            for i, row in enumerate(v):
+                k = int(np.argmax(row))
+                name = f"g_ineq[{i}]" if i < ni else f"g_eq[{i - ni}]"
+                out.append({"name": name, "violation": float(row[k]), "stage": k})
+        if gt is not None:
+            v = np.abs(np.asarray(gt, dtype=float))
+            v[:nti] = np.maximum(np.asarray(gt, dtype=float)[:nti], 0.0)
+            for i, val in enumerate(v):
+                name = f"g_tineq[{i}]" if i < nti else f"g_teq[{i - nti}]"
+                out.append({"name": name, "violation": float(val), "stage": None})
+        return sorted(out, key=lambda r: -r["violation"])
+
     def terminal_violation(self, x: np.ndarray) -> float:
         """Max violation of the terminal constraints at the final state x (nx,)."""
         gt, nti = self.terminal_constraints(x)

@@ -401,3 +401,34 @@ def test_fuel_optimal_with_a_stage_cost_that_ignores_the_homotopy_is_an_error():
     with pytest.raises(DaddyError, match="stage_cost ignores its hom"):
         solve(prob, np.zeros((prob.N, 1)), fuel_optimal=True)
     assert solve(prob, np.zeros((prob.N, 1)), fuel_optimal=False).converged
+
+
+def test_an_infeasible_problem_fails_fast_and_names_the_constraints_it_cannot_meet():
+    """10 m from rest to rest in 2 s at |u| <= 1 m/s^2 is impossible (the most the bound allows
+    is 1 m): the solve ends not converged, quickly, and its reason and ``violations`` name the
+    terminal constraints -- the position most of all -- and the thrust bound it pushed past."""
+    import time
+
+    prob = _rest_to_rest()
+    short = Problem(**{**{f: getattr(prob, f) for f in prob.__dataclass_fields__},
+                       "stage_dt": np.full(20, 0.1)})
+    t0 = time.process_time()
+    sol = solve(short, np.zeros((20, 1)))
+    assert time.process_time() - t0 < 30.0
+    assert not sol.converged and np.all(np.isfinite(sol.X)) and np.all(np.isfinite(sol.U))
+    names = [r["name"] for r in sol.violations]
+    assert set(names) == {"g_ineq[0]", "g_teq[0]", "g_teq[1]"}
+    assert sol.violations[0]["violation"] == pytest.approx(sol.max_violation)
+    assert "largest violations: g_teq[0]" in sol.reason
+    assert sol.violations[0]["name"] == "g_teq[0]" and sol.violations[0]["stage"] is None
+    again = Solution.from_json(sol.to_json())
+    assert again.violations == sol.violations
+
+
+def test_a_converged_solution_reports_every_constraint_met():
+    case = load_case("double_integrator")
+    prob = problem_from_case(case)
+    sol = solve(prob, np.zeros((prob.N, 3)), options=case_options(case, False))
+    assert sol.converged and "largest violations" not in sol.reason
+    assert {r["name"] for r in sol.violations} == {"g_teq[0]", "g_teq[1]", "g_teq[2]"}
+    assert max(r["violation"] for r in sol.violations) <= 1e-10

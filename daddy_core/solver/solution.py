@@ -26,6 +26,9 @@ class Solution:
         gains_a: (N, nu), gains_b: (N, nu, nx): feedback law of the last backward sweep.
         cost: objective sum l + phi (without the augmented-Lagrangian terms).
         max_violation: max constraint violation (normalised; inequality max(g, 0), |g| else).
+        violations: every constraint's largest violation, largest first
+            (``Problem.violation_report``: name, violation, stage); a solve that did not
+            converge also names the largest in ``reason``.
         final_mass_kg, propellant_kg: mass figures (None without a mass state).
         repropagation_miss: terminal miss after re-propagating U from x0 with DOP853 at
             rtol = atol = 1e-12 (normalised, over the terminal-constraint components); inf
@@ -58,6 +61,7 @@ class Solution:
     polynomial_share: float = 0.0
     duals: dict = field(default_factory=dict)  # {"lam": (n_c, N), "lam_t": (n_t,)} as lists
     rho: float = 0.0  # Quu regularisation at the end of the last DDP solve (warm starts resume it)
+    violations: list = field(default_factory=list)   # Problem.violation_report, largest first
     stage_maps: StageMaps | None = field(default=None, repr=False, compare=False)
 
     _ARRAYS = ("X", "U", "stage_dt", "gains_a", "gains_b")

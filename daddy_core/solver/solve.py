@@ -221,6 +221,13 @@ def _assemble(problem: Problem, end: _End, hres: HomotopyResult, steps: tuple, m
     clock.lap("repropagation", t0)
     if miss is not None and not math.isfinite(miss):
         converged, reason = False, "the DOP853 re-propagation of the final controls failed"
+    violations = problem.violation_report(X, U)
+    if not converged:   # say which constraints the returned iterate does not meet
+        worst = [r for r in violations[:3] if r["violation"] > opts.tol_newton]
+        if worst:
+            reason += "; largest violations: " + ", ".join(
+                f"{r['name']} {r['violation']:.2e}"
+                + ("" if r["stage"] is None else f" (stage {r['stage']})") for r in worst)
     t = clock.times
     gains = hres.gains
     return Solution(
@@ -240,4 +247,5 @@ def _assemble(problem: Problem, end: _End, hres: HomotopyResult, steps: tuple, m
                    "forward": stats.forward_s, "expansion": stats.expansion_s,
                    "backward": stats.backward_s, "repropagation": t["repropagation"]},
         history=hres.history, units=units.as_dict(), polynomial_share=stats.polynomial_share,
+        violations=violations,
         duals=hres.mult.as_duals(), rho=float(hres.rho), stage_maps=end.maps)
