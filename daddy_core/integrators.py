@@ -19,10 +19,8 @@ import math
 from fractions import Fraction as F
 
 import numpy as np
-# Hairer's Dormand-Prince 8(5,3) tableau as scipy ships it (the one solve_ivp's DOP853 uses;
-# test_integrators checks our steps against solve_ivp's)
-from scipy.integrate._ivp import dop853_coefficients as _dop
 
+from . import dop853_tableau as _dop
 from .da import functions as dm
 from .da.core import DA
 from .dynamics.rhs import Dynamics, as_dynamics
@@ -296,11 +294,7 @@ def _rk78_single(dyn: Dynamics, x, u, t0, dt, tol, h0, max_steps, stats):
 
 # ---------------------------------------------------------------------------------- DOP853
 _DOP_STAGES = _dop.N_STAGES   # 12 stages, then f at the new point (FSAL; not in the error)
-_DOP_ROWS = [[(j, float(a)) for j, a in enumerate(_dop.A[i, :i]) if a != 0.0]
-             for i in range(_DOP_STAGES)]
-_DOP_WEIGHTS = [(j, float(b)) for j, b in enumerate(_dop.B) if b != 0.0]
-_DOP_E5 = [(j, float(e)) for j, e in enumerate(_dop.E5) if e != 0.0]
-_DOP_E3 = [(j, float(e)) for j, e in enumerate(_dop.E3) if e != 0.0]
+_DOP_ROWS, _DOP_WEIGHTS, _DOP_E5, _DOP_E3 = _dop.A_ROWS, _dop.B, _dop.E5, _dop.E3
 _DOP_SAFETY, _DOP_MIN_FACTOR, _DOP_MAX_FACTOR = 0.9, 0.2, 10.0   # scipy's RungeKutta values
 _DOP_EXPONENT = -1.0 / 8.0   # -1 / (error estimator order 7 + 1)
 
@@ -321,7 +315,7 @@ def _dop853_step(nx: int):
     for i in range(1, _DOP_STAGES):
         xi = ", ".join(f"x{m} + {combo(_DOP_ROWS[i], m)} * h" for m in comps)
         body.append(f"{', '.join(f'k{i}_{m}' for m in comps)}, = "
-                    f"_floats(rhs(t + {float(_dop.C[i])!r} * h, state([{xi}]), u))")
+                    f"_floats(rhs(t + {_dop.C[i]!r} * h, state([{xi}]), u))")
     body += [f"y{m} = x{m} + {combo(_DOP_WEIGHTS, m)} * h" for m in comps]
     body.append(f"fn = _floats(rhs(t + h, state([{', '.join(f'y{m}' for m in comps)}]), u))")
     body += [f"s{m} = atol + max(abs(x{m}), abs(y{m})) * rtol" for m in comps]

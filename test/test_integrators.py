@@ -198,3 +198,32 @@ def test_prepared_control_changes_no_value(name):
     a = rk78(rhs, z[:7], z[7:], 0.0, T, tol=1e-8, h0=T)
     b = rk78(plain, z[:7], z[7:], 0.0, T, tol=1e-8, h0=T)
     np.testing.assert_array_equal(a.c, b.c)
+
+
+def test_the_dop853_tableau_is_scipys_to_the_last_bit():
+    """integrators.dop853 reads its tableau from daddy_core.dop853_tableau (Python floats, so
+    that importing the package does not import scipy.integrate): every entry is scipy's."""
+    from scipy.integrate._ivp import dop853_coefficients as ref
+
+    from daddy_core import dop853_tableau as tab
+    assert tab.N_STAGES == ref.N_STAGES
+    assert tab.C == [float(c) for c in ref.C[:ref.N_STAGES]]
+    for i in range(ref.N_STAGES):
+        row = np.zeros(i)
+        for j, a in tab.A_ROWS[i]:
+            row[j] = a
+        np.testing.assert_array_equal(row, ref.A[i, :i])
+    for mine, theirs in ((tab.B, ref.B), (tab.E3, ref.E3), (tab.E5, ref.E5)):
+        vec = np.zeros(len(theirs))
+        for j, v in mine:
+            vec[j] = v
+        np.testing.assert_array_equal(vec, theirs)
+
+
+def test_importing_the_solver_does_not_import_scipy_integrate():
+    import subprocess
+    import sys
+    code = ("import sys, daddy_core.solver, daddy_core.catalogue; "
+            "print('scipy.integrate' in sys.modules)")
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True)
+    assert out.stdout.strip() == "False"
