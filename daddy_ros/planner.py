@@ -247,7 +247,7 @@ class GuidancePlanner:
                 sol.stage_maps = StageMaps.of(expand_dynamics(problem, sol.X[:-1], sol.U,
                                                               sol.stage_dt),
                                               sol.X, sol.U, self.policy.warm.eps_da)
-            except (DaddyError, ValueError, FloatingPointError):
+            except (DaddyError, ValueError, ArithmeticError):
                 sol.stage_maps = None   # re-optimisations then roll out and expand afresh
         bound = self.rated_problems[self._rung_for(sol.U)].u_max
         plan = Plan.of(sol, sol.X, epoch_s, self.units, bound, request_id)

@@ -472,3 +472,16 @@ def test_nonlinear_terminal_constraints_from_a_cold_start_against_slsqp():
                                      z.reshape(N, 2) ** 2, axis=1)}])
     assert ref.success
     assert ref.fun * (1 - 1e-9) <= sol.cost <= ref.fun * (1 + 1e-3)
+
+
+def test_a_trial_step_dividing_by_zero_mass_is_rejected_not_raised():
+    """Earth-Mars in one stage (no feasible control: the target is out of reach): DDP trial
+    steps run the mass to zero, where the scalar-component models divide by a Python 0.0; such a
+    step is rejected like one that ran the mass negative, and the solve ends not converged with
+    its reason and finite values, never with a raw ZeroDivisionError."""
+    case = load_case("earth_mars")
+    prob = problem_from_case(case, stages=1)
+    sol = solve(prob, np.zeros((1, 3)), fuel_optimal=True,
+                options=case_options(case, True, time_budget_s=3.0))
+    assert not sol.converged and sol.reason
+    assert np.all(np.isfinite(sol.X)) and np.all(np.isfinite(sol.U))

@@ -315,7 +315,7 @@ def forward_pass(st: Stages, gains: Gains, alpha: float, dyn: bool) -> Trial:
         else:
             try:
                 X[k + 1] = p.stage_flow(X[k], U[k], k)
-            except (DaddyError, FloatingPointError, OverflowError):
+            except (DaddyError, ArithmeticError):   # incl. 1 / 0 on Python floats
                 return Trial(X, U, poly, dz, False, alpha)
         if not math.isfinite(X[k + 1].sum()) or (im is not None and X[k + 1, im] <= 0.0):
             return Trial(X, U, poly, dz, False, alpha)

@@ -261,7 +261,7 @@ def newton(problem: Problem, X, U, opts: SolverOptions, deadline: float | None =
             break
         try:
             fx, dmax = _float_residual(problem, X, U, opts.newton_active_tol)
-        except (DaddyError, FloatingPointError, OverflowError):
+        except (DaddyError, ArithmeticError):   # incl. 1 / 0 on Python floats
             dmax = np.inf
         if not np.isfinite(dmax):
             status = Status.NEWTON_NAN
