@@ -213,6 +213,13 @@ class Problem:
         """State (nx,) after stage k from x (nx,) under u (nu,), in floats."""
         return self.step.flow(x, u, float(self.stage_dt[k]))
 
+    def probe_point(self, U0: np.ndarray):
+        """(x (nx, 2), u (nu, 2), dt (2,)): x0 with the controls and durations of the first two
+        stages (the only one twice when N = 1), a batch of two for cheap evaluations of the
+        problem functions on floats."""
+        k = np.minimum([0, 1], self.N - 1)
+        return np.tile(self.x0[:, None], (1, 2)), np.asarray(U0, float)[k].T, self.stage_dt[k]
+
     def check_guess(self, U0) -> np.ndarray:
         """Check the initial guess and that every problem function returns finite values of the
         right shape at it, before any iteration. Returns U0 as a float (N, nu) array."""
@@ -234,9 +241,7 @@ class Problem:
             if m <= self.spacecraft.dry_mass_kg:
                 raise DaddyError(f"x0 mass ({m:.6g} kg) must exceed the dry mass "
                                  f"({self.spacecraft.dry_mass_kg:.6g} kg)")
-        x = np.tile(self.x0[:, None], (1, 2))
-        u = U0[:2].T if N >= 2 else np.tile(U0[0][:, None], (1, 2))
-        dt = self.stage_dt[:2] if N >= 2 else np.repeat(self.stage_dt, 2)
+        x, u, dt = self.probe_point(U0)
         checks = {
             "step": lambda: self.step(x, u, dt),
             "stage_cost": lambda: self.stage_cost(x, u, dt, (0.0, 1.0)),
@@ -304,16 +309,12 @@ class Problem:
         g, ni, gt, nti = self.constraint_values(X, U)
         out = []
         if g is not None:
-            v = np.abs(np.asarray(g, dtype=float))
-            v[:ni] = np.maximum(np.asarray(g, dtype=float)[:ni], 0.0)
-            for i, row in enumerate(v):
+            for i, row in enumerate(violations(g, ni)):
                 k = int(np.argmax(row))
                 name = f"g_ineq[{i}]" if i < ni else f"g_eq[{i - ni}]"
                 out.append({"name": name, "violation": float(row[k]), "stage": k})
         if gt is not None:
-            v = np.abs(np.asarray(gt, dtype=float))
-            v[:nti] = np.maximum(np.asarray(gt, dtype=float)[:nti], 0.0)
-            for i, val in enumerate(v):
+            for i, val in enumerate(violations(gt, nti)):
                 name = f"g_tineq[{i}]" if i < nti else f"g_teq[{i - nti}]"
                 out.append({"name": name, "violation": float(val), "stage": None})
         return sorted(out, key=lambda r: -r["violation"])
@@ -354,15 +355,20 @@ def _check_da_value(name: str, fn: Callable, shape: tuple) -> None:
                          f"{fix}")
 
 
-def max_violation(g, n_ineq: int) -> float:
-    """Max constraint violation of stacked values g (inequalities first): max(g, 0) for the
-    n_ineq inequalities, |g| for the equalities; 0 without constraints."""
-    if g is None or np.size(g) == 0:
-        return 0.0
+def violations(g, n_ineq: int) -> np.ndarray:
+    """Element-wise violation of stacked constraint values g (inequalities first, along the
+    first axis): max(g, 0) for the n_ineq inequalities, |g| for the equalities."""
     g = np.asarray(g, dtype=float)
     v = np.abs(g)
     v[:n_ineq] = np.maximum(g[:n_ineq], 0.0)
-    return float(v.max())
+    return v
+
+
+def max_violation(g, n_ineq: int) -> float:
+    """Max of ``violations(g, n_ineq)``; 0 without constraints."""
+    if g is None or np.size(g) == 0:
+        return 0.0
+    return float(violations(g, n_ineq).max())
 
 
 # ---------------------------------------------------------------------------------- builders

@@ -61,10 +61,8 @@ def homotopy_steps(problem: Problem, U0: np.ndarray, opts: SolverOptions,
     if not fuel_optimal:
         return hom[:1]
     steps = hom if (len(hom) > 1 or hom[0][0] > 0) else FUEL_HOMOTOPY
-    x = np.tile(problem.x0[:, None], (1, 2))
-    # any non-zero thrust (the fuel term differs there), on the first two stages (or one twice)
-    u = np.asarray(U0, float)[np.minimum([0, 1], len(U0) - 1)].T + 1.0
-    dt = np.resize(problem.stage_dt, 2)
+    x, u, dt = problem.probe_point(U0)
+    u = u + 1.0     # any non-zero thrust: the fuel term differs there
     first, last = (np.asarray(problem.stage_cost(x, u, dt, step), float)
                    for step in ((0.0, steps[0][1]), steps[-1]))
     if np.array_equal(first, last):

@@ -211,7 +211,8 @@ def _assemble(problem: Problem, end: _End, hres: HomotopyResult, steps: tuple, m
     """The Solution of the final iterate: figures of merit, the DOP853 re-propagation check,
     timings, and what a warm start needs."""
     X, U, converged, reason = end.X, end.U, end.converged, end.reason
-    gmax = problem.violation(X, U)
+    violations = problem.violation_report(X, U)   # one evaluation of the constraints
+    gmax = max((r["violation"] for r in violations), default=0.0)
     if not polish and gmax > opts.tol_aul:
         converged = False
     units, m_idx = problem.units, problem.mass_index
@@ -221,7 +222,6 @@ def _assemble(problem: Problem, end: _End, hres: HomotopyResult, steps: tuple, m
     clock.lap("repropagation", t0)
     if miss is not None and not math.isfinite(miss):
         converged, reason = False, "the DOP853 re-propagation of the final controls failed"
-    violations = problem.violation_report(X, U)
     if not converged:   # say which constraints the returned iterate does not meet
         worst = [r for r in violations[:3] if r["violation"] > opts.tol_newton]
         if worst:
