@@ -52,6 +52,7 @@ class GuidanceClient:
         self.get_params = n.create_client(GetParameters, f"/{node}/get_parameters")
         self.cond = threading.Condition()
         self.schedules, self.diags, self.thrust = [], [], []
+        self._parsed = (None, None)   # (the newest schedule message, its conversion)
         n.create_subscription(JointTrajectory, "control_schedule",
                               lambda m: self._add(self.schedules, m), LATCHED)
         n.create_subscription(DiagnosticArray, "/diagnostics", lambda m: self._add(self.diags, m),
@@ -146,8 +147,10 @@ class GuidanceClient:
             if not self.schedules:
                 return None
             msg = self.schedules[-1][1]
-        starts, u = cv.joint_trajectory_to_schedule(msg)
-        return cv.stamp_to_s(msg.header.stamp), starts, u
+            if self._parsed[0] is not msg:   # converted once per message, not per call
+                starts, u = cv.joint_trajectory_to_schedule(msg)
+                self._parsed = (msg, (cv.stamp_to_s(msg.header.stamp), starts, u))
+            return self._parsed[1]
 
     def close(self) -> None:
         self.spinner.shutdown(timeout_sec=2.0)
