@@ -12,7 +12,7 @@ import numpy as np
 
 from .errors import DaddyError
 from .catalogue import list_cases, load_case, problem_from_case
-from .solver import METHODS, Solution, case_options, solve
+from .solver import METHODS, Globalization, Solution, case_options, solve
 
 
 def _parser() -> argparse.ArgumentParser:
@@ -32,6 +32,8 @@ def _parser() -> argparse.ArgumentParser:
     s.add_argument("--npz", metavar="FILE", help="write the solution as NPZ")
     s.add_argument("--plot", metavar="FILE", help="write a PNG of the trajectory and thrust "
                    "(needs matplotlib)")
+    s.add_argument("--globalization", choices=[g.value for g in Globalization],
+                   help="DDP step control (default: the solver's)")
     s.add_argument("--time-budget", type=float, metavar="S", help="wall-clock budget in seconds")
     s.add_argument("--quiet", action="store_true", help="no progress lines")
     sub.add_parser("list", help="list the catalogue cases")
@@ -51,7 +53,8 @@ def main(argv=None) -> int:
         if args.fuel:
             fuel = True
         problem = problem_from_case(case, stages=args.stages)
-        opts = case_options(case, fuel, time_budget_s=args.time_budget)
+        extra = {} if args.globalization is None else {"globalization": args.globalization}
+        opts = case_options(case, fuel, time_budget_s=args.time_budget, **extra)
         if args.warm_start:
             u0 = Solution.from_json(args.warm_start).U
         else:

@@ -485,3 +485,54 @@ def test_a_trial_step_dividing_by_zero_mass_is_rejected_not_raised():
                 options=case_options(case, True, time_budget_s=3.0))
     assert not sol.converged and sol.reason
     assert np.all(np.isfinite(sol.X)) and np.all(np.isfinite(sol.U))
+
+
+@pytest.mark.parametrize("nu", [1, 2, 3, 4])
+def test_trust_region_inverse_puts_the_step_on_the_boundary(nu):
+    """The trust-region subproblem's shifted inverse: the step -(Quu + lam I)^-1 Qu has norm
+    radius (to 1e-3), lam >= rho, and the shifted matrix is the inverse of Quu + lam I, for
+    well- and ill-conditioned Quu (a linear-in-u cost: eigenvalues down to 1e-8)."""
+    from daddy_core.solver.ddp import _trust_region_inverse
+    rng = np.random.default_rng(10 + nu)
+    for scale in (1.0, 1e-8):
+        for _ in range(20):
+            V, _ = np.linalg.qr(rng.normal(size=(nu, nu)))
+            Q = (V * (scale * rng.uniform(0.1, 10.0, nu))) @ V.T
+            Qu = rng.normal(size=nu)
+            step = np.linalg.solve(Q, Qu)
+            radius = 0.3 * np.linalg.norm(step)
+            Minv = _trust_region_inverse(Q, Qu, 0.0, radius)
+            assert np.linalg.norm(Minv @ Qu) == pytest.approx(radius, rel=1.1e-3)
+            lam = 1.0 / np.linalg.eigvalsh(Minv).max() - np.linalg.eigvalsh(Q).min()
+            assert lam > 0
+            np.testing.assert_allclose(Minv, np.linalg.inv(Q + lam * np.eye(nu)), rtol=1e-6)
+
+
+@pytest.mark.parametrize("stages", [17, 40])
+def test_trust_region_reaches_the_same_optima_as_the_line_search(stages):
+    """Globalization.TRUST_REGION on problems with an independent answer: the double
+    integrator's closed form (every method), and the 1-D landing with a cost linear in the
+    control (maximise the final mass, no control penalty: the quadratic model's steps are
+    far too long there) at two stage counts, against the line search's optimum."""
+    from daddy_core.da import functions as dm
+    for method in ("std", "dyn", "qdyn"):
+        sol = solve_case("double_integrator", method, globalization="trust_region")
+        assert sol.converged, sol.reason
+        assert sol.cost == pytest.approx(di_closed_form(), rel=1e-9)
+    prob = _landing(stage_dt=np.full(stages, 80.0 / stages),
+                    stage_cost=lambda x, u, dt, hom: u[0] * 0.0,
+                    g_ineq=lambda x, u, dt: dm.stack([u[0] - 45.0, -u[0]]))
+    runs = [solve(prob, np.full((stages, 1), 16.0), options=SolverOptions(globalization=g))
+            for g in ("line_search", "trust_region")]
+    for sol in runs:
+        assert sol.converged and sol.max_violation <= 1e-10, sol.reason
+    assert runs[1].X[-1, 2] == pytest.approx(runs[0].X[-1, 2], rel=1e-6)
+
+
+def test_globalization_is_validated():
+    from daddy_core.solver import Globalization
+    assert SolverOptions(globalization="trust_region").globalization is Globalization.TRUST_REGION
+    with pytest.raises(DaddyError, match="options.globalization"):
+        SolverOptions(globalization="dogleg")
+    with pytest.raises(DaddyError, match="options.tr_kappa"):
+        SolverOptions(tr_kappa=1.0)

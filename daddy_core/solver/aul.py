@@ -2,6 +2,7 @@
 ALTRO-style: DDP on the augmented cost of ``lagrangian`` until the constraints are met."""
 from __future__ import annotations
 
+import math
 import time
 from dataclasses import dataclass
 
@@ -49,8 +50,10 @@ def aul(st: Stages, method: Method, opts: SolverOptions, stats: DDPStats,
     gains = None
     gmax = np.inf
     rho, rho_last = rho0, opts.rho_init if rho0 is None else rho0
+    radius = math.inf
     for it in range(1, opts.aul_max_iter + 1):
-        res = ddp(st, method, opts, stats, deadline, rho0=rho)
+        res = ddp(st, method, opts, stats, deadline, rho0=rho, radius0=radius)
+        radius = res.radius
         rho_last = res.rho
         gains = res.gains or gains
         rho = res.rho if opts.carry_rho else rho0

@@ -20,7 +20,7 @@ from ..errors import DaddyError
 from ..problem import Problem
 from .lagrangian import (Multipliers, augmented_cost, augmented_stage_cost,
                          augmented_terminal_cost)
-from .options import Method, SolverOptions, Sweep
+from .options import Globalization, Method, SolverOptions, Sweep
 from .results import Status, StepResult
 from .stage_maps import expand_dynamics, maps_at
 
@@ -53,6 +53,7 @@ class Gains:
     b: np.ndarray
     dv1: float
     dv2: float
+    clipped: int = 0   # stages whose step the trust region cut to its boundary
 
 
 # --------------------------------------------------------------------------- quadratic model
@@ -187,6 +188,30 @@ def _regularised_inverse_3(Quu: np.ndarray, rho: float) -> np.ndarray | None:
                      [m02, m12, i22 * i22]])
 
 
+def _trust_region_inverse(Quu: np.ndarray, Qu: np.ndarray, rho: float,
+                          radius: float) -> np.ndarray:
+    """(Quu + lam I)^-1 with the shift lam >= rho that puts the step -(Quu + lam I)^-1 Qu on the
+    trust-region boundary |a| = radius (the trust-region subproblem min Qu.a + a.Quu.a / 2,
+    |a| <= radius, of HDDP and the many-revolution DDP paper's section III.F; Quu + rho I is
+    positive definite and its step is outside the region). The shift solves the secular
+    equation 1/|a(lam)| = 1/radius by Newton's method (Conn, Gould & Toint Alg. 7.3.4's
+    iteration; nearly linear in lam, so a few iterations reach 1e-3 of the radius): unlike
+    a rescaled Newton step it turns the step towards the gradient where Quu is ill-conditioned,
+    and the feedback gains b_k use the same shifted Hessian."""
+    w, V = np.linalg.eigh(Quu)
+    g = V.T @ Qu
+    lam = rho
+    for _ in range(30):
+        d = w + lam
+        s2 = float(np.sum((g / d) ** 2))
+        s = math.sqrt(s2)
+        if s <= radius * (1.0 + 1e-3):
+            break
+        ds = -float(np.sum(g * g / d ** 3)) / s           # d|a|/d lam
+        lam -= (1.0 / radius - 1.0 / s) * s2 / ds
+    return (V / (w + lam)) @ V.T
+
+
 def _bordered(grad: np.ndarray, hess: np.ndarray) -> np.ndarray:
     """[[hess, grad], [grad^T, 0]] (..., m+1, m+1): the quadratic v(d) = grad.d + d^T hess d / 2
     as one symmetric matrix, (d, 1)^T B (d, 1) = 2 v(d). Compositions of such quadratics with
@@ -215,8 +240,10 @@ def _stage_q(st: Stages, k: int, Lk, Jbk, Vb, sweep: Sweep, fzz):
     return Qb_gn, Qb_gn
 
 
-def backward_sweep(st: Stages, sweep: Sweep, rho: float) -> Gains | None:
-    """One backward sweep; returns None when Q_uu + rho I is not positive definite.
+def backward_sweep(st: Stages, sweep: Sweep, rho: float,
+                   radius: float = math.inf) -> Gains | None:
+    """One backward sweep; returns None when Q_uu + rho I is not positive definite. radius: the
+    trust region of each stage's step |a_k| (``_trust_region_inverse``; inf: none).
 
     Cost-to-go and Q are carried as bordered matrices (``_bordered``): V_k = [[V_xx, V_x],
     [V_x^T, .]] (nx+1), Q_k = [[Q_zz, Q_z], [Q_z^T, .]] (n+1), z = [dx, du]. Then eq. 3 (without
@@ -239,6 +266,7 @@ def backward_sweep(st: Stages, sweep: Sweep, rho: float) -> Gains | None:
     G[n, nx] = 1.0
     K = np.empty((N, nu, n + 1))    # Minv [Q_ux, Q_uu, Q_u] = -[b_k, ., a_k] of every stage
     Qu_rows = np.empty((N, nu, n + 1))   # [Q_ux, Q_uu, Q_u] of every stage, for dv1, dv2
+    clipped = 0
     for k in range(N - 1, -1, -1):
         Qb_gn, Qb = _stage_q(st, k, L[k], Jb[k], Vb, sweep, fzz)
         Minv = _regularised_inverse(Qb[nx:n, nx:n], rho)
@@ -251,6 +279,10 @@ def backward_sweep(st: Stages, sweep: Sweep, rho: float) -> Gains | None:
             return None
         Qu_rows[k] = Qb[nx:n]
         Kk = np.matmul(Minv, Qb[nx:n], out=K[k])   # eq. 4-5: a_k = -Kk[:, n], b_k = -Kk[:, :nx]
+        if radius < math.inf and math.sqrt(Kk[:, n] @ Kk[:, n]) > radius:
+            Minv = _trust_region_inverse(Qb[nx:n, nx:n], Qb[nx:n, n], rho, radius)
+            np.matmul(Minv, Qb[nx:n], out=Kk)
+            clipped += 1
         if sweep is Sweep.Q:
             # Alg. 10: P_V,k = P_Q,k(dx, a_k + b_k dx)
             pv = da.compose(_quadratic_da(Qb[:n, n], Qb[:n, :n]),
@@ -267,7 +299,7 @@ def backward_sweep(st: Stages, sweep: Sweep, rho: float) -> Gains | None:
     Qu, Quu = Qu_rows[:, :, n], Qu_rows[:, :, nx:n]
     dv1 = np.einsum("ki,ki->", a, Qu)                       # sum_k a_k . Q_u,k
     dv2 = 0.5 * np.einsum("ki,ki->", a, np.einsum("kij,kj->ki", Quu, a))   # sum a.Q_uu.a / 2
-    return Gains(a, b, float(dv1), float(dv2))
+    return Gains(a, b, float(dv1), float(dv2), clipped)
 
 
 # ----------------------------------------------------------------------------- forward passes
@@ -339,6 +371,7 @@ class DDPResult(StepResult):
     stages: Stages
     rho: float
     gains: Gains | None  # of the last backward sweep
+    radius: float = math.inf   # trust-region radius at the end (Globalization.TRUST_REGION)
 
 
 def _raise_rho(rho: float, opts: SolverOptions, growth: float | None = None) -> float:
@@ -370,7 +403,8 @@ def _predicted_stop(st: Stages, full_step_gain: float, it: int, opts: SolverOpti
             and st.problem.violation(st.X, st.U) <= opts.tol_aul)
 
 
-def _sweep(st: Stages, sweep: Sweep, rho: float, stats: DDPStats) -> Gains | None:
+def _sweep(st: Stages, sweep: Sweep, rho: float, stats: DDPStats,
+           radius: float = math.inf) -> Gains | None:
     """A backward sweep; far from the optimum the dynamics-Hessian terms can make Q_uu
     indefinite through V_xx, and the Gauss-Newton (Std) sweep at the same rho is taken
     instead."""
@@ -378,11 +412,19 @@ def _sweep(st: Stages, sweep: Sweep, rho: float, stats: DDPStats) -> Gains | Non
     # a diverging iterate overflows Q to inf / nan: the regularised inverse rejects it (rho is
     # raised), so numpy's warnings would only be noise on the user's terminal
     with np.errstate(over="ignore", invalid="ignore"):
-        gains = backward_sweep(st, sweep, rho)
+        gains = backward_sweep(st, sweep, rho, radius)
         if gains is None and sweep is not Sweep.STD:
-            gains = backward_sweep(st, Sweep.STD, rho)
+            gains = backward_sweep(st, Sweep.STD, rho, radius)
     stats.backward_s += time.perf_counter() - t0
     return gains
+
+
+def _accepted(expected: float, actual: float, J: float, Jn: float, lo: float, hi: float) -> bool:
+    """A step whose actual / expected decrease lies in (lo, hi), or that decreases the cost
+    where the expected decrease is round-off."""
+    return bool(np.isfinite(Jn)) and (
+        (expected > 0 and lo < actual / expected < hi)
+        or (expected <= 1e-15 * max(1.0, abs(J)) and actual >= 0))
 
 
 def _line_search(st: Stages, gains: Gains, a0: float, dyn: bool, opts: SolverOptions,
@@ -396,56 +438,121 @@ def _line_search(st: Stages, gains: Gains, a0: float, dyn: bool, opts: SolverOpt
         if not trial.ok:
             continue
         Jn = trial.cost = augmented_cost(p, trial.X, trial.U, st.mult, st.hom)
-        expected = -(a * gains.dv1 + a * a * gains.dv2)
-        actual = J - Jn
-        if np.isfinite(Jn) and (
-                (expected > 0 and opts.ls_min_ratio < actual / expected < opts.ls_max_ratio)
-                or (expected <= 1e-15 * max(1.0, abs(J)) and actual >= 0)):
+        if _accepted(-(a * gains.dv1 + a * a * gains.dv2), J - Jn, J, Jn,
+                     opts.ls_min_ratio, opts.ls_max_ratio):
             return trial
     return None
 
 
+def _trust_region_step(st: Stages, gains: Gains, dyn: bool, opts: SolverOptions,
+                       J: float) -> Trial | None:
+    """The full step of a trust-region sweep, accepted when its reduction ratio actual /
+    expected lies within tr_ratio_tol of 1 (the quadratic model held); None otherwise."""
+    trial = forward_pass(st, gains, 1.0, dyn)
+    if not trial.ok:
+        return None
+    Jn = trial.cost = augmented_cost(st.problem, trial.X, trial.U, st.mult, st.hom)
+    tol = opts.tr_ratio_tol
+    expected, actual = -(gains.dv1 + gains.dv2), J - Jn
+    if _accepted(expected, actual, J, Jn, 1 - tol, 1 + tol):
+        return trial
+    # a step predicted to gain less than tol_ddp: the ratio is round-off, any decrease will do
+    small = expected < opts.tol_ddp * abs(J)
+    return trial if small and actual >= 0 and math.isfinite(Jn) else None
+
+
+def _max_step(gains: Gains) -> float:
+    """The largest stage step |a_k| of a sweep."""
+    return float(np.sqrt(np.max(np.einsum("ki,ki->k", gains.a, gains.a))))
+
+
+@dataclass
+class _StepControl:
+    """The globalisation state of one DDP solve: the Q_uu regularisation rho, and either the
+    line search's step length (carried between Dyn iterations, as in the reference code) or
+    the trust-region radius (``SolverOptions.globalization``)."""
+
+    opts: SolverOptions
+    dyn: bool
+    rho: float
+    alpha: float = 1.0
+    radius: float = math.inf
+
+    @property
+    def trust_region(self) -> bool:
+        return self.opts.globalization is Globalization.TRUST_REGION
+
+    def step(self, st: Stages, gains: Gains, J: float) -> Trial | None:
+        if self.trust_region:
+            return _trust_region_step(st, gains, self.dyn, self.opts, J)
+        return _line_search(st, gains, self.alpha if self.dyn else 1.0, self.dyn, self.opts, J)
+
+    def indefinite(self) -> Status | None:
+        """After a sweep that found Q_uu + rho I indefinite: raise rho (None) or give up."""
+        self.rho = _raise_rho(self.rho, self.opts)
+        return Status.QUU_INDEFINITE if self.rho > self.opts.rho_max else None
+
+    def rejected(self, st: Stages, gains: Gains) -> Status | None:
+        """After a rejected step: shrink the trust region, or raise rho for the line search
+        (None), or give up."""
+        o = self.opts
+        if self.trust_region:   # eq. 37 of the many-revolution DDP paper, shrinking
+            self.radius = (1.0 - o.tr_kappa) * min(self.radius, _max_step(gains))
+            floor = 1e-12 * (1.0 + float(np.max(np.abs(st.U))))
+            return Status.TRUST_REGION_COLLAPSED if self.radius < floor else None
+        self.rho = _raise_rho(self.rho, o, o.short_step_rho_growth)
+        return Status.LINE_SEARCH_FAILED if self.rho > o.rho_max else None
+
+    def accepted(self, trial: Trial) -> None:
+        if self.trust_region:   # eq. 37, growing (an unbounded region stays unbounded)
+            self.radius *= 1.0 + self.opts.tr_kappa
+            self.rho = _lower_rho(self.rho, self.opts)
+            return
+        self.rho = _rho_after_step(self.rho, trial.alpha, self.opts)
+        if self.dyn:
+            self.alpha = min(1.0, 2.0 * trial.alpha)
+
+
 def ddp(st: Stages, method: Method, opts: SolverOptions, stats: DDPStats,
-        deadline: float | None = None, rho0: float | None = None) -> DDPResult:
+        deadline: float | None = None, rho0: float | None = None,
+        radius0: float = math.inf) -> DDPResult:
     """Alg. 3: iterate backward sweep + forward pass until the relative cost decrease is small.
 
-    The line search accepts a step when actual / expected decrease lies in
-    (ls_min_ratio, ls_max_ratio), halving alpha otherwise; in the Dyn variant alpha carries over
-    between iterations (doubled after an accepted step, capped at 1), as in the reference code.
-    rho0: the Quu regularisation to start from (default opts.rho_init); see
-    ``SolverOptions.short_step`` for the optional damping of shortened steps.
+    Globalisation (``_StepControl``): the line search accepts a step when actual / expected
+    decrease lies in (ls_min_ratio, ls_max_ratio), halving alpha otherwise; in the Dyn variant
+    alpha carries over between iterations (doubled after an accepted step, capped at 1), as in
+    the reference code. The trust region bounds every stage's step and accepts the full step
+    when the reduction ratio is near 1; a rejected step shrinks the region and sweeps again on
+    the same expansions. rho0: the Quu regularisation to start from (default opts.rho_init);
+    radius0: the trust-region radius to start from.
     """
     p = st.problem
-    rho = opts.rho_init if rho0 is None else rho0
-    alpha = 1.0
+    ctl = _StepControl(opts, method.dyn, opts.rho_init if rho0 is None else rho0, radius=radius0)
     J = st.cost
     last = None
 
     def result(converged, iterations, status):
-        return DDPResult(converged, iterations, status, st, rho, last)
+        return DDPResult(converged, iterations, status, st, ctl.rho, last, ctl.radius)
 
     for it in range(1, opts.ddp_max_iter + 1):
         if deadline is not None and time.perf_counter() > deadline:
             return result(False, it - 1, Status.TIME_BUDGET)
-        gains = _sweep(st, method.sweep, rho, stats)
+        gains = _sweep(st, method.sweep, ctl.rho, stats, ctl.radius)
         if gains is None:
-            rho = _raise_rho(rho, opts)
-            if rho > opts.rho_max:
-                return result(False, it, Status.QUU_INDEFINITE)
+            if (stop := ctl.indefinite()) is not None:
+                return result(False, it, stop)
             continue
         last = gains
         full_step_gain = -(gains.dv1 + gains.dv2) / max(abs(J), 1e-300)
-        if _predicted_stop(st, full_step_gain, it, opts):
+        if not gains.clipped and _predicted_stop(st, full_step_gain, it, opts):
             return result(True, it - 1, Status.DDP_PREDICTED)
         t0 = time.perf_counter()
-        step = _line_search(st, gains, alpha if method.dyn else 1.0, method.dyn, opts, J)
+        step = ctl.step(st, gains, J)
         stats.forward_s += time.perf_counter() - t0
         if step is None:
-            rho = _raise_rho(rho, opts, opts.short_step_rho_growth)
-            if rho > opts.rho_max:
-                return result(False, it, Status.LINE_SEARCH_FAILED)
+            if (stop := ctl.rejected(st, gains)) is not None:
+                return result(False, it, stop)
             continue
-        a, Jn = step.alpha, step.cost
         stats.iterations += 1
         stats.stages_total += p.N
         stats.stages_polynomial += int(step.poly.sum())
@@ -453,14 +560,13 @@ def ddp(st: Stages, method: Method, opts: SolverOptions, stats: DDPStats,
         F = new_maps(st, step, method.dyn)
         st = Stages(p, step.X, step.U, st.mult, st.hom, st.eps_da, F=F)
         stats.expansion_s += time.perf_counter() - t0
-        rel = (J - Jn) / max(abs(J), 1e-300)
+        rel = (J - step.cost) / max(abs(J), 1e-300)
         J = st.cost
-        rho = _rho_after_step(rho, a, opts)
-        if method.dyn:
-            alpha = min(1.0, 2.0 * a)
+        ctl.accepted(step)
         # converged when the decrease is small for a (nearly) full step: a small decrease after a
-        # heavily shortened step only says the line search struggled
-        if (it >= opts.ddp_min_iter and 0.0 <= rel < opts.tol_ddp
-                and (a >= 0.5 or full_step_gain < opts.tol_ddp)):
+        # heavily shortened step only says the globalisation struggled (and a step the trust
+        # region cut says nothing of the full one)
+        if (it >= opts.ddp_min_iter and 0.0 <= rel < opts.tol_ddp and not gains.clipped
+                and (step.alpha >= 0.5 or full_step_gain < opts.tol_ddp)):
             return result(True, it, Status.DDP_CONVERGED)
     return result(False, opts.ddp_max_iter, Status.DDP_MAX_ITER)

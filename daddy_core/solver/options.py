@@ -49,6 +49,15 @@ class Method(Enum):
 METHODS = tuple(m.value for m in Method)
 
 
+class Globalization(Enum):
+    """How a DDP iteration keeps its step where the quadratic model holds: a backtracking line
+    search on the feedforward step (the reference code), or a trust region on every stage's
+    step with acceptance by the reduction ratio (HDDP, PDDP, the many-revolution DDP paper)."""
+
+    LINE_SEARCH = "line_search"
+    TRUST_REGION = "trust_region"
+
+
 @dataclass(frozen=True)
 class SolverOptions:
     """Tolerances and algorithm parameters (defaults: the reference code's values), grouped by
@@ -77,6 +86,13 @@ class SolverOptions:
             reference. A line search that fails altogether always raises rho by
             ``short_step_rho_growth`` (the reference: by rho_factor, which let DDP stall for
             hundreds of forward passes while rho crept up).
+        globalization: ``Globalization`` (or its value): "line_search" or "trust_region".
+        tr_ratio_tol, tr_kappa: the trust region accepts a step when |actual / expected - 1|
+            <= tr_ratio_tol and then grows its radius by (1 + tr_kappa), else shrinks it by
+            (1 - tr_kappa) and sweeps again on the same expansions (PDDP's Table 2: 0.1, 0.25;
+            the many-revolution DDP paper's eq. 37). The first step is unbounded (the papers
+            start from the control bound, which a general problem does not name): the first
+            rejection sets the radius to (1 - tr_kappa) times that step's largest stage step.
         carry_rho: each DDP solve of an AUL loop resumes from the previous one's rho instead
             of rho_init (each homotopy step restarts from rho_init or the warm start's rho:
             carried across homotopy steps it led the halo case to a worse local optimum).
@@ -129,6 +145,9 @@ class SolverOptions:
     short_step: float = 0.0
     short_step_rho_growth: float = 10.0
     carry_rho: bool = False
+    globalization: Globalization = Globalization.LINE_SEARCH
+    tr_ratio_tol: float = 0.1
+    tr_kappa: float = 0.25
     restore_warm_start: bool = False
     polish_from_ddp_maps: bool = False
     ddp_max_iter: int = 200
@@ -156,14 +175,20 @@ class SolverOptions:
     def __post_init__(self):
         for f in fields(self):
             v = getattr(self, f.name)
-            if f.name in ("homotopy", "time_budget_s") or f.type == "bool":
+            if f.name in ("homotopy", "time_budget_s", "globalization") or f.type == "bool":
                 continue
             if not isinstance(v, (int, float)) or v != v or v < 0:
                 raise DaddyError(f"options.{f.name} must be a non-negative number, got {v!r}")
         for name in ("tol_ddp", "tol_aul", "tol_newton", "rho_max", "rho_factor", "mu_growth"):
             if getattr(self, name) <= 0:
                 raise DaddyError(f"options.{name} must be > 0")
-        for name in ("ls_shrink", "newton_ls_shrink"):
+        try:
+            object.__setattr__(self, "globalization", Globalization(self.globalization))
+        except ValueError:
+            raise DaddyError("options.globalization must be one of "
+                             f"{[g.value for g in Globalization]}, got {self.globalization!r}") \
+                from None
+        for name in ("ls_shrink", "newton_ls_shrink", "tr_kappa"):
             if not 0 < getattr(self, name) < 1:
                 raise DaddyError(f"options.{name} must be in (0, 1), got {getattr(self, name)!r}")
         if self.newton_control_weight_floor > 1:
@@ -204,4 +229,4 @@ def case_options(case, fuel_optimal: bool, **overrides) -> SolverOptions:
     return SolverOptions(**kw)
 
 
-__all__ = ["METHODS", "Method", "SolverOptions", "Sweep", "case_options"]
+__all__ = ["METHODS", "Globalization", "Method", "SolverOptions", "Sweep", "case_options"]

@@ -17,6 +17,7 @@ class Status(Enum):
     DDP_MAX_ITER = "ddp_max_iter reached"
     QUU_INDEFINITE = "Q_uu not positive definite up to rho_max"
     LINE_SEARCH_FAILED = "line search failed up to rho_max"
+    TRUST_REGION_COLLAPSED = "trust region shrank to round-off"
     # augmented Lagrangian
     AUL_CONVERGED = "max violation below tol_aul"
     AUL_MAX_ITER = "aul_max_iter reached"
