@@ -80,6 +80,12 @@ def test_problem_settings_are_apart_from_solver_settings():
     d["solver"]["stage_cost_gain"] = d["problem"].pop("stage_cost_gain")
     with pytest.raises(DaddyError, match="solver.stage_cost_gain' belongs in 'problem'"):
         case_from_dict(d)
+    # a solver section holds the paper's per-case settings only: a solver option tuned for one
+    # case (the old short_step / carry_rho) is named, not silently applied or ignored
+    d = json.loads((load_case.__globals__["CASES_DIR"] / "halo_l2_l1.json").read_text())
+    d["solver"]["short_step"] = 0.5
+    with pytest.raises(DaddyError, match="solver.short_step' is not a case setting"):
+        case_from_dict(d)
 
 
 @pytest.mark.parametrize("name", ["earth_mars", "halo_l2_l1", "leo_leo", "double_integrator"])

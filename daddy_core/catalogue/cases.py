@@ -25,6 +25,8 @@ CASES_DIR = Path(__file__).with_name("cases")
 SYSTEMS = tuple(SYSTEM_UNITS)
 STATE_UNITS = ("normalized", "km_km_s", "keplerian_km_deg")
 PROBLEM_KEYS = ("stage_cost_gain", "terminal_cost_gain", "integrator_tol")
+# a case's solver section: the paper's per-case settings (``solver.case_options``), no others
+SOLVER_KEYS = ("tol_ddp", "tol_aul", "tol_newton", "rho_max", "homotopy", "u_guess_n")
 
 
 @dataclass(frozen=True)
@@ -110,6 +112,11 @@ def case_from_dict(d: dict) -> Case:
     if moved:
         raise DaddyError(f"case field 'solver.{moved[0]}' belongs in 'problem' (problem settings: "
                          f"{', '.join(PROBLEM_KEYS)})")
+    unknown = sorted(set(d.get("solver", {})) - set(SOLVER_KEYS))
+    if unknown:
+        raise DaddyError(f"case field 'solver.{unknown[0]}' is not a case setting (solver settings: "
+                         f"{', '.join(SOLVER_KEYS)}; other solver options are SolverOptions "
+                         "fields, the same for every case)")
     x0 = _vector(need("x0"), "x0", 6)
     xt = _vector(need("x_target"), "x_target", 6)
 

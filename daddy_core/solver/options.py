@@ -223,8 +223,6 @@ def case_options(case, fuel_optimal: bool, **overrides) -> SolverOptions:
     pairs = tuple(zip(hom["h"], hom["delta"])) if fuel_optimal else ((0.0, hom["delta"][0]),)
     kw = dict(tol_ddp=s.get("tol_ddp", 1e-4), tol_aul=s.get("tol_aul", 1e-6),
               tol_newton=s.get("tol_newton", 1e-10), rho_max=s.get("rho_max", 1e8), homotopy=pairs)
-    # our additions to the reference's settings, per case (halo: damping of shortened DDP steps)
-    kw.update({k: s[k] for k in ("short_step", "carry_rho") if k in s})
     kw.update(overrides)
     return SolverOptions(**kw)
 
