@@ -420,6 +420,11 @@ def test_an_infeasible_problem_fails_fast_and_names_the_constraints_it_cannot_me
     assert set(names) == {"g_ineq[0]", "g_teq[0]", "g_teq[1]"}
     assert sol.violations[0]["violation"] == pytest.approx(sol.max_violation)
     assert "largest violations: g_teq[0]" in sol.reason
+    # the augmented Lagrangian says it stalled (penalty at its cap, violation not falling)
+    # instead of running its aul_max_iter iterations, and the polishing stops as fast
+    assert "stalled with the penalty at mu_max" in sol.reason
+    assert sol.iterations["aul"] < SolverOptions().aul_max_iter
+    assert sol.iterations["newton"] <= SolverOptions().newton_stall_iter + 1
     assert sol.violations[0]["name"] == "g_teq[0]" and sol.violations[0]["stage"] is None
     again = Solution.from_json(sol.to_json())
     assert again.violations == sol.violations

@@ -40,6 +40,22 @@ def update_multipliers(mult: Multipliers, g, gt, opts: SolverOptions) -> Multipl
                        mult.n_ineq, mult.n_tineq)
 
 
+def _at_cap(mult: Multipliers, opts: SolverOptions) -> bool:
+    """Every penalty at mu_max."""
+    return (float(np.min(mult.mu, initial=np.inf)) >= opts.mu_max
+            and float(np.min(mult.mu_t, initial=np.inf)) >= opts.mu_max)
+
+
+def _stalled(history: list, capped: int, opts: SolverOptions) -> bool:
+    """The augmented Lagrangian has stalled: the last ``aul_stall_iter`` DDP solves ran with
+    the penalty at mu_max (``capped`` solves in a row did) and the max violation fell by less
+    than half over them (from there the multiplier updates only grow the cost: the iterate
+    sits where the constraints cannot be reduced, e.g. an infeasible problem or a local
+    minimiser of the violation)."""
+    k = opts.aul_stall_iter
+    return 0 < k <= capped and len(history) > k and history[-1] > 0.5 * history[-1 - k]
+
+
 def aul(st: Stages, method: Method, opts: SolverOptions, stats: DDPStats,
         deadline: float | None = None, progress=None, rho0: float | None = None) -> AULResult:
     """Alg. 4 from the expanded nominal ``st`` (its multipliers and homotopy point): DDP on the
@@ -51,6 +67,7 @@ def aul(st: Stages, method: Method, opts: SolverOptions, stats: DDPStats,
     gmax = np.inf
     rho, rho_last = rho0, opts.rho_init if rho0 is None else rho0
     radius = math.inf
+    history, capped = [], 0   # max violation after each DDP solve; solves at mu_max in a row
     for it in range(1, opts.aul_max_iter + 1):
         res = ddp(st, method, opts, stats, deadline, rho0=rho, radius0=radius)
         radius = res.radius
@@ -67,6 +84,10 @@ def aul(st: Stages, method: Method, opts: SolverOptions, stats: DDPStats,
             return AULResult(False, it, Status.TIME_BUDGET, st, mult, gmax, rho_last, gains)
         if gmax <= opts.tol_aul:
             return AULResult(True, it, Status.AUL_CONVERGED, st, mult, gmax, rho_last, gains)
+        history.append(gmax)
+        capped = capped + 1 if _at_cap(mult, opts) else 0   # this DDP solve's penalty
+        if _stalled(history, capped, opts):
+            return AULResult(False, it, Status.AUL_STALLED, st, mult, gmax, rho_last, gains)
         mult = update_multipliers(mult, g, gt, opts)
         st = Stages(problem, st.X, st.U, mult, hom, opts.eps_da, F=st.F)
     return AULResult(False, opts.aul_max_iter, Status.AUL_MAX_ITER, st, mult, gmax, rho_last,

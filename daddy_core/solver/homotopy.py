@@ -30,7 +30,9 @@ class HomotopyResult:
         mult: the multipliers at the end; gains: the last backward sweep's (or None).
         rho: Quu regularisation at the end of the last DDP solve.
         aul_iterations: summed over the steps; history: one summary dict per step.
-        converged: every step met tol_aul; reason: the first step that did not, and why.
+        converged: every step met tol_aul or stalled (``Status.AUL_STALLED``: the polishing
+            decides); reason: the first step that did neither, and why.
+        stalled: the first step whose AUL stalled, and at what (empty if none).
     """
 
     X: np.ndarray
@@ -43,6 +45,7 @@ class HomotopyResult:
     history: list = field(default_factory=list)
     converged: bool = True
     reason: str = "converged"
+    stalled: str = ""
 
 
 def homotopy_steps(problem: Problem, U0: np.ndarray, opts: SolverOptions,
@@ -83,7 +86,7 @@ def continuation(problem: Problem, X, U, steps: tuple, method: Method, opts: Sol
     mult = Multipliers.initial(problem, opts.mu_init)
     mult.take_duals(duals)
     best, gains, history, aul_iterations = (X, U), None, [], 0
-    converged, reason = True, "converged"
+    converged, reason, stalled = True, "converged", ""
     res = None
     for i, hom in enumerate(steps):
         if progress:
@@ -101,9 +104,14 @@ def continuation(problem: Problem, X, U, steps: tuple, method: Method, opts: Sol
         history.append({"h": hom[0], "delta": hom[1], "aul_iterations": res.iterations,
                         "max_violation": res.max_violation, "cost": res.stages.cost,
                         "converged": res.converged, "reason": res.reason})
-        if not res.converged:
+        if res.status is Status.AUL_STALLED:
+            # the penalty can do no more: the next step goes on from here, and Newton's
+            # polishing finally meets the constraints or reports that they cannot be met
+            stalled = stalled or (f"homotopy step {i + 1}: {res.reason} (max violation "
+                                  f"{res.max_violation:.2e})")
+        elif not res.converged:
             converged, reason = False, f"homotopy step {i + 1}: {res.reason}"
             if res.status is Status.TIME_BUDGET:
                 break
     return HomotopyResult(best[0], best[1], res.stages, mult, gains, res.rho, aul_iterations,
-                          history, converged, reason)
+                          history, converged, reason, stalled)

@@ -259,6 +259,7 @@ def newton(problem: Problem, X, U, opts: SolverOptions, deadline: float | None =
     best = None
     status = Status.NEWTON_MAX_ITER
     prev_dmax, fresh = np.inf, True
+    history = []   # the best residual after each outer iteration
     while it < opts.newton_max_iter:
         if deadline is not None and time.perf_counter() > deadline:
             status = Status.TIME_BUDGET
@@ -272,6 +273,11 @@ def newton(problem: Problem, X, U, opts: SolverOptions, deadline: float | None =
             break
         if best is None or dmax < best[0]:
             best = (dmax, X.copy(), U.copy(), infeasibility)
+        history.append(best[0])
+        k = opts.newton_stall_iter
+        if 0 < k < len(history) and history[-1] > 0.5 * history[-1 - k]:
+            status = Status.NEWTON_STALLED   # Newton converges fast or not at all
+            break
         if dmax <= opts.tol_newton:
             status = Status.NEWTON_CONVERGED
             break

@@ -100,11 +100,18 @@ class SolverOptions:
         tol_aul: maximum constraint violation that stops the augmented Lagrangian.
         aul_max_iter: outer iteration bound.
         lambda_max, mu_init, mu_max, mu_growth: multiplier bound and penalty schedule.
+        aul_stall_iter: stop (``Status.AUL_STALLED``) when the penalty has been at mu_max for
+            this many outer iterations and the max violation fell by less than half over them
+            (0: never): a failing solve then says so in seconds instead of spending its
+            aul_max_iter iterations or its time budget.
     Newton (Alg. 5 / 11):
         tol_newton: maximum constraint violation targeted by Newton polishing.
         newton_max_iter: outer iterations (one expansion each); newton_inner_max_iter: inner
             iterations on one polynomial model; newton_ls_shrink, newton_ls_max_halvings: the
             backtracking of an inner step (it must reduce the model's max residual).
+        newton_stall_iter: stop (``Status.NEWTON_STALLED``) when the best residual did not
+            halve over this many outer iterations (0: never): each outer iteration converges
+            its model at a Newton rate, so a run this slow is one that will not converge.
         newton_cv_ratio: the convergence-rate threshold (eps_CV, paper Alg. 5).
         newton_active_tol: an inequality with g > -tol is treated as active.
         newton_regularisation: diagonal added to Delta Delta^T if it is not positive definite.
@@ -160,7 +167,9 @@ class SolverOptions:
     mu_init: float = 1.0
     mu_max: float = 1e8
     mu_growth: float = 10.0
+    aul_stall_iter: int = 3
     newton_cv_ratio: float = 1.1
+    newton_stall_iter: int = 10
     newton_active_tol: float = 1e-6
     newton_regularisation: float = 1e-12
     newton_control_weight_floor: float = 1e-2

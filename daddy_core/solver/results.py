@@ -21,12 +21,14 @@ class Status(Enum):
     # augmented Lagrangian
     AUL_CONVERGED = "max violation below tol_aul"
     AUL_MAX_ITER = "aul_max_iter reached"
+    AUL_STALLED = "max violation stalled with the penalty at mu_max"
     # Newton
     NEWTON_CONVERGED = "active constraints below tol_newton"
     NEWTON_MAX_ITER = "newton_max_iter reached"
     NEWTON_NAN = "constraint evaluation produced NaN"
     NEWTON_SINGULAR = "Delta Delta^T is singular"
     NEWTON_NO_DESCENT = "no descent on the constraint model"
+    NEWTON_STALLED = "max residual did not halve over newton_stall_iter iterations"
 
 
 @dataclass

@@ -197,11 +197,14 @@ def _finish(problem: Problem, hres: HomotopyResult, start: _Start, polish: bool,
         if res.improved:
             end.X, end.U = res.X, res.U
             end.maps = res.maps or end.maps
-        if not res.converged:
-            end.converged, end.reason = False, f"newton polishing: {res.reason}"
+        if not res.converged:   # (after a stalled AUL: the constraints cannot be met here)
+            end.converged, end.reason = False, "; ".join(
+                filter(None, (hres.stalled, f"newton polishing: {res.reason}")))
         clock.lap("newton", t0)
     else:
         clock.times["newton"] = 0.0
+        if hres.stalled and end.converged:   # nothing else can meet the constraints
+            end.converged, end.reason = False, hres.stalled
     return end
 
 
