@@ -250,16 +250,15 @@ def newton(problem: Problem, X, U, opts: SolverOptions, deadline: float | None =
     stage per outer iteration). The stage maps that give their derivatives are re-centred from
     the previous outer iteration's -- first from ``maps``, e.g. a previous plan's -- where the
     step stayed inside their convergence radius (paper eq. 11, as in the Dyn forward pass) and
-    re-expanded elsewhere. Newton on these derivatives converges at a rate
-    set by their truncation error; an outer iteration that does not reduce the exact residual
-    makes the next one expand every stage afresh.
+    re-expanded elsewhere. Newton on these derivatives converges at a rate set by their
+    truncation error; an outer iteration that does not reduce the exact residual makes the next
+    one expand every stage afresh. Converged: the returned (best) iterate meets every
+    constraint to tol_newton, whether or not each near-active inequality reached its bound.
     """
     X0, U0 = X.copy(), U.copy()
-    it = 0
-    best = None
+    it, best, history = 0, None, []   # history: the best residual after each outer iteration
     status = Status.NEWTON_MAX_ITER
     prev_dmax, fresh = np.inf, True
-    history = []   # the best residual after each outer iteration
     while it < opts.newton_max_iter:
         if deadline is not None and time.perf_counter() > deadline:
             status = Status.TIME_BUDGET
@@ -274,12 +273,9 @@ def newton(problem: Problem, X, U, opts: SolverOptions, deadline: float | None =
         if best is None or dmax < best[0]:
             best = (dmax, X.copy(), U.copy(), infeasibility)
         history.append(best[0])
-        k = opts.newton_stall_iter
-        if 0 < k < len(history) and history[-1] > 0.5 * history[-1 - k]:
-            status = Status.NEWTON_STALLED   # Newton converges fast or not at all
-            break
-        if dmax <= opts.tol_newton:
-            status = Status.NEWTON_CONVERGED
+        if dmax <= opts.tol_newton or _stalled(history, opts.newton_stall_iter):
+            status = (Status.NEWTON_CONVERGED if dmax <= opts.tol_newton
+                      else Status.NEWTON_STALLED)
             break
         if dmax >= prev_dmax and not fresh:
             maps = None   # the re-centred derivatives did not help: expand afresh
@@ -305,10 +301,13 @@ def newton(problem: Problem, X, U, opts: SolverOptions, deadline: float | None =
     if best is None:
         return NewtonResult(False, it, status, X0, U0, np.inf, False, maps)
     _, Xb, Ub, viol = best
-    # converged: the returned iterate meets every constraint to tol_newton, whether or not
-    # Newton also drove each near-active inequality to its bound (a run that ends on
-    # newton_max_iter with a feasible best iterate has polished it)
     return NewtonResult(viol <= opts.tol_newton, it, status, Xb, Ub, viol, True, maps)
+
+
+def _stalled(history: list, k: int) -> bool:
+    """The best residual (``history``: after each outer iteration) did not halve over the last
+    k outer iterations: Newton converges fast or not at all."""
+    return 0 < k < len(history) and history[-1] > 0.5 * history[-1 - k]
 
 
 def _factorise(model: _Model, scale: np.ndarray | None, reg: float) -> _BandedSigma | None:
