@@ -16,6 +16,10 @@ A warm re-plan starts from a converged plan shifted to the new state (``shift``)
 - Newton treats inequalities within WARM_ACTIVE_TOL of their bound as active: the AUL leaves a
   fuel-optimal plan's full-thrust arcs slightly inside the bound, and with them inactive
   Newton's first minimum-norm step pushed them past it and the next ones pulled them back;
+- the stall rules of cold solves are off (``aul_stall_iter``, ``newton_stall_iter``): the
+  penalty starts three growth steps below its cap, so "three solves at the cap" is no stall
+  there, and a re-plan that cannot meet its target has the thrust-margin ladder and the last
+  valid plan to fall back on;
 - DDP does not stop on its prediction alone (``SolverOptions.ddp_stop_on_prediction``): the
   small steps it would skip are what keeps closed-loop plans optimal (propellant and arrival
   margin in the Monte Carlo).
@@ -75,7 +79,8 @@ class ReplanPolicy:
         warm_tol_aul = config.tol_aul or (max(WARM_TOL_AUL, cold.tol_aul) if config.polish
                                           else cold.tol_aul)
         warm = cold.with_(homotopy=cold.homotopy[-1:], ddp_min_iter=1, mu_init=WARM_MU_INIT,
-                          short_step=0.5, carry_rho=True,
+                          short_step=0.5, carry_rho=True, aul_stall_iter=0,
+                          newton_stall_iter=0,
                           restore_warm_start=bool(config.restore_first), tol_aul=warm_tol_aul,
                           polish_from_ddp_maps=True,
                           newton_active_tol=max(WARM_ACTIVE_TOL, cold.newton_active_tol))

@@ -4,5 +4,5 @@ from .results import Status
 from .solution import Solution, WarmStart
 from .solve import repropagation_miss, solve
 
-__all__ = ["METHODS", "Globalization", "Method", "SolverOptions", "Solution", "Status", "Sweep", "WarmStart",
-           "case_options", "repropagation_miss", "solve"]
+__all__ = ["METHODS", "Globalization", "Method", "SolverOptions", "Solution", "Status", "Sweep",
+           "WarmStart", "case_options", "repropagation_miss", "solve"]

@@ -61,7 +61,8 @@ def aul(st: Stages, method: Method, opts: SolverOptions, stats: DDPStats,
     """Alg. 4 from the expanded nominal ``st`` (its multipliers and homotopy point): DDP on the
     augmented cost, multiplier and penalty updates, until the maximum constraint violation is
     below tol_aul. rho0: Quu regularisation to start from (None: opts.rho_init); with
-    opts.carry_rho each DDP solve resumes from the previous one's."""
+    opts.carry_rho each DDP solve resumes from the previous one's (the trust-region radius
+    always does). Stops early when the penalty can do no more (``_stalled``)."""
     problem, mult, hom = st.problem, st.mult, st.hom
     gains = None
     gmax = np.inf
