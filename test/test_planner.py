@@ -318,3 +318,15 @@ def test_config_yaml_lists_every_node_parameter_with_its_default():
     pl = GuidancePlanner()
     assert pl.config == PlannerConfig() and pl.case.name == declared["scenario"]
     assert pl.time_budget_s == declared["time_budget_s"]
+
+
+def test_warm_replans_optimise_the_cost_their_loaded_plan_was_solved_for():
+    """A loaded fuel-optimal plan sets the warm (and arrival) re-plans' homotopy step to its own
+    last one; the cold solve keeps the case's whole homotopy."""
+    pl = GuidancePlanner("halo_l2_l1")
+    case_last = pl.policy.cold.homotopy[-1]
+    plan_file = PLANS_DIR / "halo_l2_l1_fuel.json"
+    last = json.loads(plan_file.read_text())["history"][-1]
+    pl.load_plan(plan_file, T0_S)
+    assert pl.policy.warm.homotopy == pl.policy.arrival.homotopy == ((last["h"], last["delta"]),)
+    assert pl.policy.cold.homotopy[-1] == case_last
