@@ -5,7 +5,7 @@ rate, the distinct optima found and the solve times (the measurement of PDDP's T
 
     .venv/bin/python bench/bench_robustness.py CASE [--guesses 100] [--seed 0] [--cap 60]
                                                [--jobs 2] [--energy]
-                                               [--globalization trust_region] [--paper-settings]
+                                               [--globalization trust_region]
 
 Success: converged, max violation <= 1e-10, and the final mass within WINDOW_KG of the paper's
 (Tables 6 and 9: the Dyn column, m_N + 500 kg dry mass; the double integrator: its closed-form
@@ -52,11 +52,8 @@ def guesses(case_name: str, n: int, seed: int) -> list[np.ndarray]:
 
 def run_one(job) -> dict:
     """Solve one guess (a worker process)."""
-    case_name, fuel, U0, cap, globalization, paper_only = job
+    case_name, fuel, U0, cap, globalization = job
     case = load_case(case_name)
-    if paper_only:   # without the project's per-case additions to the paper's settings
-        for key in ("short_step", "carry_rho"):
-            case.solver.pop(key, None)
     prob = problem_from_case(case)
     opts = case_options(case, fuel, time_budget_s=cap, globalization=globalization)
     t0 = time.process_time()
@@ -84,11 +81,9 @@ def main() -> int:
     ap.add_argument("--energy", action="store_true", help="energy-optimal (default: fuel)")
     ap.add_argument("--globalization", default="line_search",
                     choices=[g.value for g in Globalization])
-    ap.add_argument("--paper-settings", action="store_true",
-                    help="drop the case file's short_step / carry_rho (the paper's settings only)")
     args = ap.parse_args()
     fuel = not args.energy and args.case != "double_integrator"
-    jobs = [(args.case, fuel, U0, args.cap, args.globalization, args.paper_settings)
+    jobs = [(args.case, fuel, U0, args.cap, args.globalization)
             for U0 in guesses(args.case, args.guesses, args.seed)]
     wall = time.perf_counter()
     with concurrent.futures.ProcessPoolExecutor(max(1, args.jobs)) as pool:
@@ -99,9 +94,9 @@ def main() -> int:
     optima = {v: values.count(v) for v in dict.fromkeys(values)}
     cpu = [r["cpu_s"] for r in runs]
     kind = "fuel" if fuel else "energy"
-    print(f"{args.case} {kind}, {args.globalization}"
-          f"{', paper settings only' if args.paper_settings else ''}, {len(runs)} guesses "
-          f"(seed {args.seed}, cap {args.cap:g} s, {args.jobs} jobs): success {len(ok)}/{len(runs)} ({len(ok) / len(runs):.0%}); "
+    print(f"{args.case} {kind}, {args.globalization}, {len(runs)} guesses (seed {args.seed}, "
+          f"cap {args.cap:g} s, {args.jobs} jobs): success {len(ok)}/{len(runs)} "
+          f"({len(ok) / len(runs):.0%}); "
           f"CPU per solve median {statistics.median(cpu):.2f} s, max {max(cpu):.2f} s; wall "
           f"{wall:.0f} s")
     ref = PAPER.get(args.case)

@@ -12,7 +12,7 @@ from ..problem import max_violation
 from .ddp import DDPStats, Gains, Stages, ddp
 from .lagrangian import Multipliers
 from .options import Method, SolverOptions
-from .results import Status, StepResult
+from .results import Status, StepResult, not_halved
 
 
 @dataclass
@@ -52,8 +52,7 @@ def _stalled(history: list, capped: int, opts: SolverOptions) -> bool:
     than half over them (from there the multiplier updates only grow the cost: the iterate
     sits where the constraints cannot be reduced, e.g. an infeasible problem or a local
     minimiser of the violation)."""
-    k = opts.aul_stall_iter
-    return 0 < k <= capped and len(history) > k and history[-1] > 0.5 * history[-1 - k]
+    return opts.aul_stall_iter <= capped and not_halved(history, opts.aul_stall_iter)
 
 
 def aul(st: Stages, method: Method, opts: SolverOptions, stats: DDPStats,

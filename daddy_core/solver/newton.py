@@ -33,9 +33,9 @@ from scipy.linalg import LinAlgError, cho_solve_banded, cholesky_banded
 
 from .. import da
 from ..errors import DaddyError
-from ..problem import Problem
+from ..problem import Problem, max_violation
 from .options import SolverOptions
-from .results import Status, StepResult
+from .results import Status, StepResult, not_halved
 from .stage_maps import StageMaps, expand_dynamics
 
 
@@ -199,16 +199,14 @@ def _float_residual(problem: Problem, X, U, active_tol: float):
     it)."""
     fx = problem.step(X[:-1].T, U.T, problem.stage_dt)                     # (nx, N)
     defect = float(np.max(np.abs(X[1:].T - fx)))
-    vals = [defect]
-    g, ni = problem.path_constraints(X[:-1].T, U.T, problem.stage_dt)
-    if g is not None:
-        g = np.asarray(g, dtype=float)
-        vals.append(float(np.max(np.abs(g[_active(g, ni, active_tol)]), initial=0.0)))
-    gt, nti = problem.terminal_constraints(X[-1])
-    if gt is not None:
-        gt = np.asarray(gt, dtype=float)
-        vals.append(float(np.max(np.abs(gt[_active(gt, nti, active_tol)]), initial=0.0)))
-    return fx, max(vals), max(defect, problem.violation(X, U))
+    active, infeasible = [defect], [defect]
+    g, ni, gt, nti = problem.constraint_values(X, U)
+    for c, n_ineq in ((g, ni), (gt, nti)):
+        if c is not None:
+            c = np.asarray(c, dtype=float)
+            active.append(float(np.max(np.abs(c[_active(c, n_ineq, active_tol)]), initial=0.0)))
+            infeasible.append(max_violation(c, n_ineq))
+    return fx, max(active), max(infeasible)
 
 
 def exact_valued_maps(problem: Problem, maps: StageMaps | None, X, U, fx,
@@ -273,7 +271,8 @@ def newton(problem: Problem, X, U, opts: SolverOptions, deadline: float | None =
         if best is None or dmax < best[0]:
             best = (dmax, X.copy(), U.copy(), infeasibility)
         history.append(best[0])
-        if dmax <= opts.tol_newton or _stalled(history, opts.newton_stall_iter):
+        # Newton converges fast or not at all: a best residual that did not halve is a stall
+        if dmax <= opts.tol_newton or not_halved(history, opts.newton_stall_iter):
             status = (Status.NEWTON_CONVERGED if dmax <= opts.tol_newton
                       else Status.NEWTON_STALLED)
             break
@@ -302,12 +301,6 @@ def newton(problem: Problem, X, U, opts: SolverOptions, deadline: float | None =
         return NewtonResult(False, it, status, X0, U0, np.inf, False, maps)
     _, Xb, Ub, viol = best
     return NewtonResult(viol <= opts.tol_newton, it, status, Xb, Ub, viol, True, maps)
-
-
-def _stalled(history: list, k: int) -> bool:
-    """The best residual (``history``: after each outer iteration) did not halve over the last
-    k outer iterations: Newton converges fast or not at all."""
-    return 0 < k < len(history) and history[-1] > 0.5 * history[-1 - k]
 
 
 def _factorise(model: _Model, scale: np.ndarray | None, reg: float) -> _BandedSigma | None:

@@ -31,6 +31,13 @@ class Status(Enum):
     NEWTON_STALLED = "max residual did not halve over newton_stall_iter iterations"
 
 
+def not_halved(history: list, k: int) -> bool:
+    """The last of ``history`` (a violation or residual after each iteration) is above half the
+    one k iterations before (False until there are k + 1 of them, or when k = 0): the test
+    behind ``Status.AUL_STALLED`` and ``Status.NEWTON_STALLED``."""
+    return 0 < k < len(history) and history[-1] > 0.5 * history[-1 - k]
+
+
 @dataclass
 class StepResult:
     """What every solver stage reports: converged, its iteration count and why it stopped."""
