@@ -7,10 +7,12 @@ rate, the distinct optima found and the solve times (the measurement of PDDP's T
                                                [--jobs 2] [--energy]
                                                [--globalization trust_region]
 
-Success: converged, max violation <= 1e-10, and the final mass within WINDOW_KG of the paper's
-(Tables 6 and 9: the Dyn column, m_N + 500 kg dry mass; the double integrator: its closed-form
-cost). The CasADi + IPOPT transcription is not run here (not installed on the development
-machine; it would be benchmark-only, never a dependency).
+Success: converged (feasible and KKT residual <= tol_optimality), max violation <= 1e-10, and
+the final mass within WINDOW_KG of the paper's (Tables 6 and 9: the Dyn column, m_N + 500 kg dry
+mass; the double integrator: its closed-form cost). The count of runs feasible in that window
+whatever their KKT residual is printed too (the success of the code before the KKT residual
+became part of ``converged``). The CasADi + IPOPT transcription is not run here (not installed
+on the development machine; it would be benchmark-only, never a dependency).
 """
 from __future__ import annotations
 
@@ -66,9 +68,11 @@ def run_one(job) -> dict:
     ref = PAPER.get(case_name) if fuel or case_name == "double_integrator" else None
     in_window = ref is None or (abs(value - ref) <= WINDOW_KG if sol.final_mass_kg is not None
                                 else abs(value - ref) <= 1e-6 * abs(ref))
-    ok = sol.converged and sol.max_violation <= 1e-10 and in_window
-    return {"ok": ok, "converged": sol.converged, "value": value, "cpu_s": time.process_time() - t0,
-            "violation": sol.max_violation, "reason": sol.reason if not ok else ""}
+    feasible = sol.max_violation <= 1e-10 and in_window
+    ok = sol.converged and feasible
+    return {"ok": ok, "converged": sol.converged, "feasible": feasible, "value": value,
+            "cpu_s": time.process_time() - t0, "violation": sol.max_violation,
+            "kkt": sol.kkt_residual, "reason": sol.reason if not ok else ""}
 
 
 def main() -> int:
@@ -96,7 +100,8 @@ def main() -> int:
     kind = "fuel" if fuel else "energy"
     print(f"{args.case} {kind}, {args.globalization}, {len(runs)} guesses (seed {args.seed}, "
           f"cap {args.cap:g} s, {args.jobs} jobs): success {len(ok)}/{len(runs)} "
-          f"({len(ok) / len(runs):.0%}); "
+          f"({len(ok) / len(runs):.0%}; feasible in the window whatever the KKT residual: "
+          f"{sum(bool(r.get('feasible')) for r in runs)}); "
           f"CPU per solve median {statistics.median(cpu):.2f} s, max {max(cpu):.2f} s; wall "
           f"{wall:.0f} s")
     ref = PAPER.get(args.case)

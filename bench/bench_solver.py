@@ -1,6 +1,7 @@
 """Solver benchmark: wall and CPU time per acceptance case, iterations, the time split of the DDP
-(forward pass / expansion / backward sweep / Newton) and the share of stages served by polynomial
-evaluation, next to the C++ reference's CPU time measured on this machine type (issue #3).
+(forward pass / expansion / backward sweep / Newton / KKT polishing), the final KKT residual and
+the share of stages served by polynomial evaluation, next to the C++ reference's CPU time
+measured on this machine type (issue #3).
 
     .venv/bin/python bench/bench_solver.py [--all] [--method dyn] [--repeat 3]
 """
@@ -45,7 +46,7 @@ def main():
     print(f"machine: {machine()}")
     hdr = (f"{'case':22s} {'conv':>4s} {'m_f kg':>9s} {'viol':>8s} {'wall s':>7s} {'cpu s':>7s} "
            f"{'C++ s':>6s} {'ratio':>6s} {'DDP it':>6s} {'ms/it fwd/exp/bwd':>20s} {'newton s':>8s} "
-           f"{'poly':>5s}")
+           f"{'kkt s':>6s} {'KKT res':>8s} {'poly':>5s}")
     print(hdr)
     for name, fuel, cpp, _ in CASES:
         if (args.case and name not in args.case) or (
@@ -61,7 +62,8 @@ def main():
         print(f"{label:22s} {str(sol.converged)[0]:>4s} {sol.final_mass_kg:9.3f} "
               f"{sol.max_violation:8.1e} {wall:7.2f} {cpu:7.2f} "
               + (f"{cpp:6.1f} {cpu / cpp:6.2f} " if cpp else f"{'-':>6s} {'-':>6s} ") +
-              f"{it:6d} {split:>20s} {rt['newton']:8.2f} {sol.polynomial_share:5.0%}"
+              f"{it:6d} {split:>20s} {rt['newton']:8.2f} {rt['kkt']:6.2f} "
+              f"{sol.kkt_residual:8.1e} {sol.polynomial_share:5.0%}"
               + (f"  (cpu {runs[0][2]:.2f}-{runs[-1][2]:.2f} s over {len(runs)})"
                  if len(runs) > 1 else ""), flush=True)
     print("ratio = our CPU time / the C++ reference's CPU time (target <= 1, stretch <= 0.5)")

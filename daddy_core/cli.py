@@ -87,12 +87,14 @@ def _report(sol: Solution) -> None:
     rt = sol.runtime_s
     print(f"case {sol.case}  method {sol.method}  {'fuel' if sol.fuel_optimal else 'energy'}-optimal"
           f"  converged {sol.converged} ({sol.reason})")
-    print(f"  cost {sol.cost:.10g}  max violation {sol.max_violation:.2e}  "
+    kkt = "n/a" if sol.kkt_residual is None else f"{sol.kkt_residual:.2e}"
+    print(f"  cost {sol.cost:.10g}  max violation {sol.max_violation:.2e}  KKT residual {kkt}  "
           f"re-propagation miss {sol.repropagation_miss if sol.repropagation_miss is None else f'{sol.repropagation_miss:.2e}'}")
     if sol.final_mass_kg is not None:
         print(f"  final mass {sol.final_mass_kg:.3f} kg  propellant {sol.propellant_kg:.3f} kg")
     print(f"  iterations: homotopy {it['homotopy']}, AUL {it['aul']}, DDP {it['ddp']}, "
-          f"Newton {it['newton']}; polynomial share {sol.polynomial_share:.0%}")
+          f"Newton {it['newton']}, KKT {it.get('kkt', 0)}; "
+          f"polynomial share {sol.polynomial_share:.0%}")
     print(f"  runtime {rt['total']:.2f} s (DDP {rt['ddp']:.2f} s, Newton {rt['newton']:.2f} s)")
 
 

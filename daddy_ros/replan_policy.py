@@ -22,7 +22,10 @@ A warm re-plan starts from a converged plan shifted to the new state (``shift``)
   valid plan to fall back on;
 - DDP does not stop on its prediction alone (``SolverOptions.ddp_stop_on_prediction``): the
   small steps it would skip are what keeps closed-loop plans optimal (propellant and arrival
-  margin in the Monte Carlo).
+  margin in the Monte Carlo);
+- the KKT residual is neither evaluated nor polished (``tol_optimality`` = inf): its
+  expansion of every stage and the KKT polishing's would cost a re-plan more than its whole
+  latency target allows, and a re-plan starts next to a plan that was polished.
 The arrival phase (the re-gridded last stages) keeps the case's AUL tolerance, Newton active
 set and fresh expansions for the polish: its plans decide the arrival miss.
 
@@ -32,6 +35,7 @@ plan that took the full rating at once has nothing left for the next execution e
 """
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass, replace
 
 from daddy_core.catalogue import Case
@@ -80,7 +84,7 @@ class ReplanPolicy:
                                           else cold.tol_aul)
         warm = cold.with_(homotopy=cold.homotopy[-1:], ddp_min_iter=1, mu_init=WARM_MU_INIT,
                           short_step=0.5, carry_rho=True, aul_stall_iter=0,
-                          newton_stall_iter=0,
+                          newton_stall_iter=0, tol_optimality=math.inf,
                           restore_warm_start=bool(config.restore_first), tol_aul=warm_tol_aul,
                           polish_from_ddp_maps=True,
                           newton_active_tol=max(WARM_ACTIVE_TOL, cold.newton_active_tol))

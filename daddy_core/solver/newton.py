@@ -56,8 +56,9 @@ def _active(g0: np.ndarray, n_ineq: int, active_tol: float) -> np.ndarray:
     return act
 
 
-class _Model:
-    """Order-2 expansion of the active constraints at one Y."""
+class ConstraintModel:
+    """Order-2 expansion of the active constraints at one Y (``active_tol`` = inf: every
+    constraint, as ``optimality`` needs them)."""
 
     def __init__(self, problem: Problem, X, U, active_tol: float, F=None):
         p = self.p = problem
@@ -66,14 +67,14 @@ class _Model:
         self.F = expand_dynamics(p, X[:-1], U, p.stage_dt) if F is None else F   # (nx, N)
         z = da.variables(np.concatenate([X[:-1].T, U.T]), order=2)
         g, ni = p.path_constraints(z[:nx], z[nx:], p.stage_dt)
-        self.G = g
+        self.G, self.n_ineq = g, ni
         if g is not None:
             self.g_active = _active(g.cons, ni, active_tol)             # (n_c, N)
         else:
             self.g_active = np.zeros((0, N), dtype=bool)
         xn = da.variables(X[-1], order=2)
         gt, nti = p.terminal_constraints(xn)
-        self.Gt = gt
+        self.Gt, self.n_tineq = gt, nti
         if gt is not None:
             self.t_active = _active(gt.cons, nti, active_tol)
         else:
@@ -120,6 +121,15 @@ class _Model:
         rows, cols, vals = (np.concatenate(x) for x in zip(*parts))
         self.D = sp.csr_matrix((vals, (rows, cols)), shape=(r, N * w))
 
+    def inequality_rows(self) -> np.ndarray:
+        """(n_rows,) bool: which rows of D (and of ``residual()``) are inequalities."""
+        parts = []
+        ineq = np.arange(self.g_active.shape[0]) < self.n_ineq
+        for k in range(self.p.N):
+            parts += [ineq[self.g_active[:, k]], np.zeros(self.p.nx, dtype=bool)]
+        parts.append((np.arange(self.t_active.size) < self.n_tineq)[self.t_active])
+        return np.concatenate(parts)
+
     def residual(self, dY: np.ndarray | None = None) -> np.ndarray:
         """Gamma(Y + dY) from the polynomial model (dY = None: at Y, i.e. exact values)."""
         p = self.p
@@ -145,16 +155,17 @@ class _Model:
             parts.append(gt[self.t_active])
         return np.concatenate(parts)
 
-    def apply(self, dY: np.ndarray):
+    def apply(self, dY: np.ndarray, X: np.ndarray | None = None, U: np.ndarray | None = None):
+        """(X, U) + dY (default: the model's own point)."""
         p = self.p
         w = p.nx + p.nu
         b = dY.reshape(p.N, w)
-        X = self.X.copy()
+        X = (self.X if X is None else X).copy()
         X[1:] += b[:, p.nu:]
-        return X, self.U + b[:, :p.nu]
+        return X, (self.U if U is None else U) + b[:, :p.nu]
 
 
-def _column_weights(problem: Problem, U: np.ndarray, floor: float) -> np.ndarray | None:
+def column_weights(problem: Problem, U: np.ndarray, floor: float) -> np.ndarray | None:
     """sqrt(W) of the weighted step over Y's columns (N * (nu + nx),): 1 on the states,
     max(|u_k| / u_max, floor) on the controls of stage k; None for plain steps (floor 0 or no
     thrust bound)."""
@@ -166,11 +177,12 @@ def _column_weights(problem: Problem, U: np.ndarray, floor: float) -> np.ndarray
     return s.ravel()
 
 
-class _BandedSigma:
-    """Cholesky factor of Sigma = D W D^T (+ reg I) in LAPACK banded storage, W = diag(scale^2)
-    (scale None: W = I)."""
+class BandedSigma:
+    """Cholesky factor of Sigma = D W D^T + diag(reg) in LAPACK banded storage, W =
+    diag(scale^2) (scale None: W = I; reg: a number or one per row)."""
 
-    def __init__(self, D: sp.csr_matrix, reg: float, scale: np.ndarray | None = None):
+    def __init__(self, D: sp.csr_matrix, reg: float | np.ndarray,
+                 scale: np.ndarray | None = None):
         if scale is not None:   # D sqrt(W): the columns scaled
             D = D.copy()
             D.data *= scale[D.indices]
@@ -185,6 +197,10 @@ class _BandedSigma:
         self.cb = cholesky_banded(ab, lower=False)
         self.D = D
 
+    def solve(self, b: np.ndarray) -> np.ndarray:
+        """Sigma^{-1} b."""
+        return cho_solve_banded((self.cb, False), b)
+
     def step(self, d: np.ndarray) -> np.ndarray:
         """dY = -W D^T Sigma^{-1} d, with self.D = D sqrt(W)."""
         dY = -(self.D.T @ cho_solve_banded((self.cb, False), d))
@@ -193,8 +209,8 @@ class _BandedSigma:
 
 def _float_residual(problem: Problem, X, U, active_tol: float):
     """Gamma(Y) in floats: the stage flows f(x_k, u_k) (nx, N) from one batched float
-    integration, max |Gamma(Y)| over the same active set as ``_Model.residual()``, and the
-    iterate's infeasibility: the largest stage defect or constraint violation (an inequality
+    integration, max |Gamma(Y)| over the same active set as ``ConstraintModel.residual()``, and
+    the iterate's infeasibility: the largest stage defect or constraint violation (an inequality
     counts by max(g, 0): Newton drives the near-active ones to g = 0, feasibility does not need
     it)."""
     fx = problem.step(X[:-1].T, U.T, problem.stage_dt)                     # (nx, N)
@@ -280,9 +296,9 @@ def newton(problem: Problem, X, U, opts: SolverOptions, deadline: float | None =
             maps = None   # the re-centred derivatives did not help: expand afresh
         prev_dmax = dmax
         fresh = maps is None
-        model = _Model(problem, X, U, opts.newton_active_tol,
-                       F=exact_valued_maps(problem, maps, X, U, fx, opts.map_reach))
-        sigma = _factorise(model, _column_weights(problem, U, opts.newton_control_weight_floor),
+        model = ConstraintModel(problem, X, U, opts.newton_active_tol,
+                                F=exact_valued_maps(problem, maps, X, U, fx, opts.map_reach))
+        sigma = _factorise(model, column_weights(problem, U, opts.newton_control_weight_floor),
                            opts.newton_regularisation)
         if sigma is None:
             status = Status.NEWTON_SINGULAR
@@ -303,18 +319,20 @@ def newton(problem: Problem, X, U, opts: SolverOptions, deadline: float | None =
     return NewtonResult(viol <= opts.tol_newton, it, status, Xb, Ub, viol, True, maps)
 
 
-def _factorise(model: _Model, scale: np.ndarray | None, reg: float) -> _BandedSigma | None:
+def _factorise(model: ConstraintModel, scale: np.ndarray | None,
+               reg: float) -> BandedSigma | None:
     """Sigma's factor, with a larger regularisation if it is not positive definite; None when
     it is singular even then."""
     for r in (reg, max(1e-8, 1e3 * reg)):
         try:
-            return _BandedSigma(model.D, r, scale)
+            return BandedSigma(model.D, r, scale)
         except (LinAlgError, ValueError):
             continue
     return None
 
 
-def _inner_iterations(model: _Model, sigma: _BandedSigma, dmax: float, opts: SolverOptions):
+def _inner_iterations(model: ConstraintModel, sigma: BandedSigma, dmax: float,
+                      opts: SolverOptions):
     """Alg. 11's inner loop: Newton steps on the polynomial model, re-using the factorisation,
     each backtracked until it reduces the model's max residual, while the model converges at a
     rate r = log d*_max / log d_max above eps_CV. Returns (dY, number of steps taken)."""

@@ -133,6 +133,23 @@ class SolverOptions:
             iteration that does not reduce the residual expands afresh.
     Homotopy (eq. 12-14):
         homotopy: sequence of (h, delta) pairs (h = Huber weight, delta = Huber width).
+    Optimality (``optimality``: the relative KKT residual reported as
+    ``Solution.kkt_residual``):
+        tol_optimality: a polished solve converges when its final iterate meets the
+            constraints and its KKT residual is at most this (``polish=False``: the residual is
+            reported, the DDP's own test decides; inf: neither evaluated nor checked, as the
+            guidance node's warm re-plans run, and ``Solution.kkt_residual`` is None). Above it
+            after the Newton polishing, the KKT polishing (``kkt_polish``: Newton on the KKT
+            conditions, each step restored to feasibility) runs for at most ``kkt_max_iter``
+            iterations: DDP's relative-decrease test stops early on ill-conditioned problems,
+            where a step along a stiff direction gains little however large the gradient.
+        kkt_cost_slack: a KKT step whose cost at Y + dY misses the cost's own quadratic model
+            by more than this many predicted decreases is refused before its restoration (it
+            left the region where the cost is quadratic) and the Hessian shift raised.
+        kkt_chord_iter, kkt_restore_iter: a KKT step's restoration to feasibility: chord
+            iterations on the step's own Jacobian first (each one float integration), then
+            Newton with at most kkt_restore_iter iterations (a step needing more left the
+            region where the linearisation holds: a larger shift is cheaper).
     Run:
         time_budget_s: wall-clock budget for the whole solve (None: unbounded).
         verbose: print progress lines (homotopy step, AUL iteration, violation, cost).
@@ -178,6 +195,11 @@ class SolverOptions:
     newton_ls_max_halvings: int = 25
     map_reach: float = 10.0
     homotopy: tuple = ((0.0, 1e-2),)
+    tol_optimality: float = 1e-4
+    kkt_max_iter: int = 30
+    kkt_cost_slack: float = 5.0
+    kkt_chord_iter: int = 6
+    kkt_restore_iter: int = 4
     time_budget_s: float | None = None
     verbose: bool = False
 
@@ -188,7 +210,8 @@ class SolverOptions:
                 continue
             if not isinstance(v, (int, float)) or v != v or v < 0:
                 raise DaddyError(f"options.{f.name} must be a non-negative number, got {v!r}")
-        for name in ("tol_ddp", "tol_aul", "tol_newton", "rho_max", "rho_factor", "mu_growth"):
+        for name in ("tol_ddp", "tol_aul", "tol_newton", "tol_optimality", "rho_max",
+                     "rho_factor", "mu_growth"):
             if getattr(self, name) <= 0:
                 raise DaddyError(f"options.{name} must be > 0")
         try:

@@ -29,6 +29,10 @@ class Status(Enum):
     NEWTON_SINGULAR = "Delta Delta^T is singular"
     NEWTON_NO_DESCENT = "no descent on the constraint model"
     NEWTON_STALLED = "max residual did not halve over newton_stall_iter iterations"
+    # KKT polishing
+    KKT_CONVERGED = "KKT residual below tol_optimality"
+    KKT_MAX_ITER = "kkt_max_iter reached"
+    KKT_NO_DESCENT = "no KKT step lowered the cost"
 
 
 def not_halved(history: list, k: int) -> bool:

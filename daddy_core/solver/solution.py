@@ -26,6 +26,11 @@ class Solution:
         gains_a: (N, nu), gains_b: (N, nu, nx): feedback law of the last backward sweep.
         cost: objective sum l + phi (without the augmented-Lagrangian terms).
         max_violation: max constraint violation (normalised; inequality max(g, 0), |g| else).
+        kkt_residual: first-order optimality of (X, U) for the cost at the last homotopy step
+            (``solver.optimality``: the least-squares KKT residual, stationarity and
+            complementarity, relative to the largest cost-gradient component; 0 at a KKT
+            point); None when it was not evaluated (an iterate that does not meet the
+            constraints, ``SolverOptions.tol_optimality`` = inf) or could not be.
         violations: every constraint's largest violation, largest first
             (``Problem.violation_report``: name, violation, stage); a solve that did not
             converge also names the largest in ``reason``.
@@ -62,6 +67,7 @@ class Solution:
     duals: dict = field(default_factory=dict)  # {"lam": (n_c, N), "lam_t": (n_t,)} as lists
     rho: float = 0.0  # Quu regularisation at the end of the last DDP solve (warm starts resume it)
     violations: list = field(default_factory=list)   # Problem.violation_report, largest first
+    kkt_residual: float | None = None   # solver.optimality (None in plans saved before it)
     stage_maps: StageMaps | None = field(default=None, repr=False, compare=False)
 
     _ARRAYS = ("X", "U", "stage_dt", "gains_a", "gains_b")

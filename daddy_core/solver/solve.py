@@ -18,6 +18,8 @@ from ..problem import Problem
 from . import newton
 from .ddp import DDPStats
 from .homotopy import HomotopyResult, continuation, homotopy_steps
+from .kkt_polish import kkt_polish
+from .optimality import Optimality, objective, optimality
 from .options import Method, SolverOptions
 from .solution import Solution, WarmStart
 from .stage_maps import StageMaps
@@ -44,12 +46,6 @@ def repropagation_miss(problem: Problem, U: np.ndarray) -> float | None:
     if problem.terminal_constraints(x)[0] is None:
         return None
     return problem.terminal_violation(x)
-
-
-def objective(problem: Problem, X, U, hom) -> float:
-    """The problem's own cost sum l + phi (no augmented-Lagrangian terms)."""
-    return float(np.sum(problem.stage_cost(X[:-1].T, U.T, problem.stage_dt, hom))
-                 + problem.terminal_cost(X[-1], problem.x_target))
 
 
 @dataclass
@@ -92,6 +88,9 @@ class _End:
     converged: bool
     reason: str
     newton_iterations: int
+    optimality: Optimality | None = None
+    kkt_iterations: int = 0
+    kkt_reason: str = ""
 
 
 def solve(problem: Problem, u_guess=None, method: Method | str = Method.DYN,
@@ -131,6 +130,7 @@ def solve(problem: Problem, u_guess=None, method: Method | str = Method.DYN,
                         progress, rho=warm.rho, duals=warm.duals, F=start.F)
     clock.lap("ddp", t0)
     end = _finish(problem, hres, start, polish, opts, clock, progress)
+    end = _kkt(problem, end, hres.stages.hom, polish, opts, clock, progress)
     return _assemble(problem, end, hres, steps, method, stats, clock, opts, case_name, polish)
 
 
@@ -205,6 +205,31 @@ def _finish(problem: Problem, hres: HomotopyResult, start: _Start, polish: bool,
         clock.times["newton"] = 0.0
         if hres.stalled and end.converged:   # nothing else can meet the constraints
             end.converged, end.reason = False, hres.stalled
+    t0 = time.perf_counter()
+    if end.converged and math.isfinite(opts.tol_optimality):   # (of a feasible iterate only)
+        end.optimality = optimality(problem, end.X, end.U, hres.stages.hom, end.maps)
+    clock.lap("optimality", t0)
+    return end
+
+
+def _kkt(problem: Problem, end: _End, hom: tuple, polish: bool, opts: SolverOptions,
+         clock: _Clock, progress) -> _End:
+    """The KKT polishing (``kkt_polish``) of a polished, converged end whose KKT residual is
+    above ``opts.tol_optimality``."""
+    opt = end.optimality
+    if not (polish and end.converged and opt is not None
+            and opt.kkt_residual > opts.tol_optimality):
+        return end
+    t0 = time.perf_counter()
+    res = kkt_polish(problem, end.X, end.U, hom, opts, opt, clock.deadline)
+    clock.lap("kkt", t0)
+    if progress:
+        progress(f"KKT polishing: {res.iterations} iterations, KKT residual "
+                 f"{opt.kkt_residual:.2e} -> {res.optimality.kkt_residual:.2e} ({res.reason})")
+    end.X, end.U, end.optimality, end.maps = res.X, res.U, res.optimality, res.maps or end.maps
+    end.newton_iterations += res.newton_iterations
+    end.kkt_iterations = res.iterations
+    end.kkt_reason = res.reason
     return end
 
 
@@ -231,6 +256,14 @@ def _assemble(problem: Problem, end: _End, hres: HomotopyResult, steps: tuple, m
             reason += "; largest violations: " + ", ".join(
                 f"{r['name']} {r['violation']:.2e}"
                 + ("" if r["stage"] is None else f" (stage {r['stage']})") for r in worst)
+    opt = end.optimality
+    if polish and converged and math.isfinite(opts.tol_optimality) and (
+            opt is None or opt.kkt_residual > opts.tol_optimality):
+        converged = False
+        reason = ("the KKT residual could not be evaluated" if opt is None else
+                  f"KKT residual {opt.kkt_residual:.2e} above tol_optimality "
+                  f"{opts.tol_optimality:g} after {end.kkt_iterations} KKT iterations "
+                  f"({end.kkt_reason})")
     t = clock.times
     gains = hres.gains
     return Solution(
@@ -240,15 +273,18 @@ def _assemble(problem: Problem, end: _End, hres: HomotopyResult, steps: tuple, m
         gains_a=gains.a if gains else np.zeros((N, nu)),
         gains_b=gains.b if gains else np.zeros((N, nu, nx)),
         cost=objective(problem, X, U, steps[-1]), max_violation=gmax,
+        kkt_residual=None if opt is None else opt.kkt_residual,
         final_mass_kg=float(X[-1, m_idx] * units.mu_kg) if m_idx is not None else None,
         propellant_kg=float((X[0, m_idx] - X[-1, m_idx]) * units.mu_kg)
         if m_idx is not None else None, repropagation_miss=miss,
         iterations={"homotopy": len(hres.history), "aul": hres.aul_iterations,
-                    "ddp": stats.iterations, "newton": end.newton_iterations},
+                    "ddp": stats.iterations, "newton": end.newton_iterations,
+                    "kkt": end.kkt_iterations},
         runtime_s={"total": time.perf_counter() - clock.start, "rollout": t["rollout"],
                    "restore": t["restore"], "ddp": t["ddp"], "newton": t["newton"],
                    "forward": stats.forward_s, "expansion": stats.expansion_s,
-                   "backward": stats.backward_s, "repropagation": t["repropagation"]},
+                   "backward": stats.backward_s, "repropagation": t["repropagation"],
+                   "optimality": t["optimality"], "kkt": t.get("kkt", 0.0)},
         history=hres.history, units=units.as_dict(), polynomial_share=stats.polynomial_share,
         violations=violations,
         duals=hres.mult.as_duals(), rho=float(hres.rho), stage_maps=end.maps)

@@ -1,0 +1,88 @@
+"""First-order optimality: the KKT residual a solve reports, and the KKT polishing that drives
+it below tol_optimality (daddy_core.solver.optimality, kkt_polish)."""
+import json
+
+import numpy as np
+import pytest
+
+from daddy_core.catalogue import load_case, problem_from_case
+from daddy_core.solver import Solution, SolverOptions, case_options, solve
+from daddy_core.solver.kkt_polish import kkt_polish
+from daddy_core.solver.optimality import objective, optimality
+
+DI = load_case("double_integrator")
+HOM = (0.0, 1e-2)
+
+
+def _di_optimum():
+    """The double integrator's solution (its closed form: test_solver.di_closed_form)."""
+    prob = problem_from_case(DI)
+    return prob, solve(prob, np.zeros((prob.N, 3)), options=case_options(DI, False))
+
+
+def _feasible_detour(prob, U, scale):
+    """Controls moved off the optimum in a direction that keeps the terminal constraint: a
+    mode of the Euler double integrator's (dt = 1) position map sum_k (N - 1 - k) u_k that sums
+    to zero against it."""
+    N = prob.N
+    w = np.arange(N - 1, -1, -1, dtype=float)
+    d = np.sin(np.arange(N))[:, None] * np.array([1.0, -0.5, 0.25])
+    d -= np.outer(w, w @ d) / (w @ w)                      # w . d = 0 on every axis
+    U2 = U + scale * d
+    return prob.rollout(U2), U2
+
+
+def test_the_residual_vanishes_at_the_optimum_and_not_beside_it():
+    prob, sol = _di_optimum()
+    assert sol.converged and sol.kkt_residual <= 1e-8
+    X2, U2 = _feasible_detour(prob, sol.U, 1e-2)
+    assert prob.violation(X2, U2) <= 1e-10                  # feasible, but not optimal
+    assert objective(prob, X2, U2, HOM) > sol.cost
+    assert optimality(prob, X2, U2, HOM).kkt_residual > 1e-3
+
+
+def test_kkt_polishing_returns_to_the_optimum_feasible_and_never_costlier():
+    """From a feasible detour, Newton on the KKT conditions returns to the closed-form optimum
+    (to 1e-9 in the cost), every iterate feasible, in a few iterations (the problem is a QP:
+    one step, up to the restoration)."""
+    prob, sol = _di_optimum()
+    X2, U2 = _feasible_detour(prob, sol.U, 5e-2)
+    start = optimality(prob, X2, U2, HOM)
+    opts = SolverOptions(tol_optimality=1e-8)
+    res = kkt_polish(prob, X2, U2, HOM, opts, start)
+    assert res.converged and res.iterations <= 3
+    assert prob.violation(res.X, res.U) <= 1e-10
+    assert objective(prob, res.X, res.U, HOM) == pytest.approx(sol.cost, rel=1e-9)
+    assert res.optimality.kkt_residual <= 1e-8
+
+
+def test_infinite_tolerance_neither_evaluates_nor_polishes():
+    prob = problem_from_case(DI)
+    sol = solve(prob, np.zeros((prob.N, 3)),
+                options=case_options(DI, False, tol_optimality=np.inf))
+    assert sol.converged and sol.kkt_residual is None and sol.iterations["kkt"] == 0
+
+
+def test_a_solve_that_cannot_reach_tol_optimality_says_so_and_keeps_its_best_iterate():
+    """Earth-Mars energy-optimal: one KKT iteration cannot reach 1e-14; the solve is not
+    converged, its reason names the KKT residual, and the iterate it returns is the polished
+    one -- feasible, and no more costly than the DDP's."""
+    case = load_case("earth_mars")
+    prob = problem_from_case(case)
+    u0 = np.full((prob.N, 3), float(case.units.thrust(case.solver["u_guess_n"])))
+    ddp = solve(prob, u0, options=case_options(case, False, tol_optimality=np.inf))
+    sol = solve(prob, u0, options=case_options(case, False, tol_optimality=1e-14,
+                                               kkt_max_iter=1))
+    assert not sol.converged and "KKT residual" in sol.reason and "kkt_max_iter" in sol.reason
+    assert sol.max_violation <= 1e-10 and np.all(np.isfinite(sol.U))
+    assert sol.cost <= ddp.cost and sol.iterations["kkt"] == 1
+    assert 1e-14 < sol.kkt_residual < 1e-4
+
+
+def test_the_residual_round_trips_and_older_solutions_load():
+    _, sol = _di_optimum()
+    d = json.loads(sol.to_json())
+    assert d["kkt_residual"] == sol.kkt_residual
+    assert Solution.from_json(sol.to_json()).kkt_residual == sol.kkt_residual
+    del d["kkt_residual"]   # a plan saved before the field existed
+    assert Solution.from_dict(d).kkt_residual is None
