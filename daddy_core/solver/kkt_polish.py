@@ -45,8 +45,9 @@ from scipy.sparse.linalg import splu
 from .. import da
 from ..errors import DaddyError
 from ..problem import Problem, max_violation
-from .newton import BandedSigma, ConstraintModel, NewtonResult, column_weights, newton
-from .optimality import Optimality, cost_gradient, every_constraint, objective, optimality
+from .newton import (BandedSigma, ConstraintModel, NewtonResult, column_weights, newton,
+                     stage_columns)
+from .optimality import Optimality, every_constraint, objective, optimality
 from .options import SolverOptions
 from .results import Status, StepResult
 from .stage_maps import StageMaps
@@ -91,7 +92,8 @@ def kkt_polish(problem: Problem, X, U, hom, opts: SolverOptions, optimality0: Op
             break
         it += 1
         try:
-            step = _iteration(problem, X, U, hom, f, model, mu, level, opts, deadline)
+            step = _iteration(problem, X, U, hom, f, model, mu, opt.gradient, level, opts,
+                              deadline)
             if step is not None:
                 model = every_constraint(problem, step[0], step[1])
                 new = optimality(problem, step[0], step[1], hom, model=model)
@@ -108,13 +110,12 @@ def kkt_polish(problem: Problem, X, U, hom, opts: SolverOptions, optimality0: Op
 
 
 def _iteration(problem: Problem, X, U, hom, f: float, model: ConstraintModel,
-               mu: np.ndarray, level: int, opts: SolverOptions, deadline):
+               mu: np.ndarray, c: np.ndarray, level: int, opts: SolverOptions, deadline):
     """One KKT step (module docstring) from the Hessian shift ``level``, raised until the
     restored step lowers the cost by at least a tenth of the quadratic model's prediction:
     (X, U, cost, Newton iterations, the QP's multipliers, the next level), or None when no
-    shift does."""
+    shift does. c: the cost gradient at (X, U)."""
     Hf, H = _hessians(problem, X, U, hom, model, mu)
-    c = cost_gradient(problem, X, U, hom)
     g = model.residual()
     ineq = model.inequality_rows()
     work = ~ineq | (g > -opts.newton_active_tol)
@@ -243,8 +244,7 @@ def _over_y(Hk: np.ndarray, Ht: np.ndarray, nx: int, nu: int) -> sp.csr_matrix:
     """Stage blocks Hk (N, n, n) in z_k = [x_k, u_k] and the terminal block Ht (nx, nx) on x_N
     as one sparse matrix over Y (x_0 is fixed: its rows and columns are left out)."""
     N, w = Hk.shape[0], nx + nu
-    z_cols = np.concatenate([np.arange(nu, w) - w, np.arange(nu)])          # [x_k, u_k] - k w
-    cols = np.arange(N)[:, None] * w + z_cols[None, :]                      # (N, n)
+    cols = stage_columns(np.arange(N), nx, nu)                              # (N, n)
     keep = (cols[:, :, None] >= 0) & (cols[:, None, :] >= 0)
     rows = np.broadcast_to(cols[:, :, None], Hk.shape)[keep]
     cc = np.broadcast_to(cols[:, None, :], Hk.shape)[keep]

@@ -56,6 +56,15 @@ def _active(g0: np.ndarray, n_ineq: int, active_tol: float) -> np.ndarray:
     return act
 
 
+def stage_columns(ks: np.ndarray, nx: int, nu: int) -> np.ndarray:
+    """Columns of z_k = [x_k, u_k] in Y = [u_0, x_1, u_1, ..., u_{N-1}, x_N] for the stages
+    ks, (len(ks), nx + nu): x_k is block k - 1's tail, u_k block k's head; x_0 is fixed, so
+    stage 0's state columns come out negative (callers drop them)."""
+    w = nx + nu
+    z_cols = np.concatenate([np.arange(nu, w) - w, np.arange(nu)])
+    return np.asarray(ks)[:, None] * w + z_cols[None, :]
+
+
 class ConstraintModel:
     """Order-2 expansion of the active constraints at one Y (``active_tol`` = inf: every
     constraint, as ``optimality`` needs them)."""
@@ -89,12 +98,11 @@ class ConstraintModel:
         w = nx + nu
         n_g = self.g_active.sum(axis=0)                              # (N,) active rows per stage
         start = np.concatenate([[0], np.cumsum(n_g + nx)])           # first row of each stage
-        z_cols = np.concatenate([np.arange(nu, w) - w, np.arange(nu)])   # [x_k, u_k] - k w
         parts = []                                                   # (rows, cols, vals) blocks
 
         def stage_rows(rows, ks, Jz):
             """Rows depending on z_k = [x_k, u_k] (Jz: (m, n)); x_0 is fixed (no columns)."""
-            cols = ks[:, None] * w + z_cols[None, :]
+            cols = stage_columns(ks, nx, nu)
             keep = cols >= 0
             parts.append((np.broadcast_to(rows[:, None], cols.shape)[keep], cols[keep],
                           Jz[keep]))

@@ -36,7 +36,7 @@ from scipy.linalg import LinAlgError
 from .. import da
 from ..errors import DaddyError
 from ..problem import Problem
-from .newton import BandedSigma, ConstraintModel
+from .newton import BandedSigma, ConstraintModel, stage_columns
 from .stage_maps import StageMaps, expand_dynamics
 
 _HOLD = 1e12          # diagonal that holds a negative inequality multiplier at zero
@@ -50,6 +50,7 @@ class Optimality:
     stationarity: float
     complementarity: float
     multipliers: np.ndarray   # mu, in the rows of ``every_constraint``'s model
+    gradient: np.ndarray      # c, the cost gradient over Y (``cost_gradient``)
 
     @property
     def kkt_residual(self) -> float:
@@ -69,11 +70,12 @@ def cost_gradient(problem: Problem, X: np.ndarray, U: np.ndarray, hom) -> np.nda
     z = da.variables(np.concatenate([X[:-1].T, U.T]), order=1)
     lz = _gradient(p.stage_cost(z[:nx], z[nx:], p.stage_dt, hom), (N, nx + nu))
     phix = _gradient(p.terminal_cost(da.variables(X[-1], order=1), p.x_target), (nx,))
-    c = np.zeros((N, nx + nu))
-    c[:, :nu] = lz[:, nx:]           # u_k
-    c[:-1, nu:] = lz[1:, :nx]        # x_{k+1} in stage k + 1's cost
-    c[-1, nu:] += phix               # x_N
-    return c.ravel()
+    cols = stage_columns(np.arange(N), nx, nu)
+    keep = cols >= 0                 # (x_0 is fixed)
+    c = np.zeros(N * (nx + nu))
+    c[cols[keep]] = lz[keep]         # each column belongs to one stage's cost
+    c[cols[-1, :nx] + nx + nu] += phix   # x_N: the state columns of stage N
+    return c
 
 
 def _gradient(value, shape: tuple) -> np.ndarray:
@@ -82,29 +84,29 @@ def _gradient(value, shape: tuple) -> np.ndarray:
 
 
 def every_constraint(problem: Problem, X: np.ndarray, U: np.ndarray,
-                     maps: StageMaps | None = None, reach: float = 1.0) -> ConstraintModel:
+                     maps: StageMaps | None = None) -> ConstraintModel:
     """Newton's order-2 constraint model at (X, U) with every constraint in its rows (inactive
-    inequalities too); the stage maps re-centred from ``maps`` within ``reach`` radii, or (None)
-    expanded."""
+    inequalities too); the stage maps re-centred from ``maps`` where a stage lies within their
+    radius (expanded elsewhere), or (None) expanded."""
     F = expand_dynamics(problem, X[:-1], U, problem.stage_dt) if maps is None \
-        else maps.at(problem, X, U, reach=reach)
+        else maps.at(problem, X, U)
     return ConstraintModel(problem, X, U, math.inf, F=F)
 
 
 def optimality(problem: Problem, X: np.ndarray, U: np.ndarray, hom,
-               maps: StageMaps | None = None, reach: float = 1.0,
+               maps: StageMaps | None = None,
                model: ConstraintModel | None = None) -> Optimality | None:
     """The first-order optimality of (X, U) (module docstring) for the stage cost at ``hom``.
 
     ``model``: ``every_constraint``'s model at (X, U), if built already; else built here, its
-    stage maps re-centred from ``maps`` within ``reach`` radii (None: every stage expanded).
+    stage maps re-centred from ``maps`` within their radius (None: every stage expanded).
     None when the figures cannot be evaluated (a non-finite iterate or derivative, a singular
     system).
     """
     if not (np.all(np.isfinite(X)) and np.all(np.isfinite(U))):
         return None
     try:
-        model = model or every_constraint(problem, X, U, maps, reach)
+        model = model or every_constraint(problem, X, U, maps)
         c = cost_gradient(problem, X, U, hom)
         g = model.residual()   # constraint values in D's row order
         ineq = model.inequality_rows()
@@ -120,7 +122,7 @@ def optimality(problem: Problem, X: np.ndarray, U: np.ndarray, hom,
     if scale == 0.0:   # no cost gradient: any residual is absolute
         scale = 1.0
     comp = float(np.max(np.abs(mu[ineq] * g[ineq]), initial=0.0))
-    return Optimality(float(np.max(np.abs(r), initial=0.0)) / scale, comp / scale, mu)
+    return Optimality(float(np.max(np.abs(r), initial=0.0)) / scale, comp / scale, mu, c)
 
 
 def _multipliers(D, c: np.ndarray, g: np.ndarray, ineq: np.ndarray) -> np.ndarray | None:
