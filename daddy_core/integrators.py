@@ -207,8 +207,19 @@ _RK78_WEIGHTS = [(j, float(b)) for j, b in enumerate(RK78_B) if b != 0.0]
 
 
 def _float_list(v) -> list:
-    """A right-hand side's value as a list of Python floats (an ndarray's tolist() directly)."""
+    """A right-hand side's value as a list of Python floats: the list a scalar-component rhs
+    returns (``da.functions.vector``) as it is, an ndarray's tolist() directly."""
+    if type(v) is list:
+        return v
     return v.tolist() if type(v) is np.ndarray else np.asarray(v, dtype=float).tolist()
+
+
+def _unpack_rhs(names: list[str], call: str) -> list[str]:
+    """Generated lines assigning a right-hand side's value ``call`` to the float variables
+    ``names``: a list (what ``da.functions.vector`` returns on floats) unpacks directly, anything
+    else through ``_float_list``, without a function call per rhs call for the list."""
+    return [f"k_ = {call}", "if type(k_) is not list:", "    k_ = _floats(k_)",
+            f"{', '.join(names)}, = k_"]
 
 
 @functools.lru_cache(maxsize=None)
@@ -224,12 +235,12 @@ def _single_step(nx: int):
         return " + ".join([f"x{m}"] + [f"{prefix}{j} * k{j}_{m}" for j, _ in rows])
 
     body = [f"x{m} = x[{m}]" for m in comps]
-    body.append(f"{', '.join(f'k0_{m}' for m in comps)}, = _floats(rhs(t, state(x), u))")
+    body += _unpack_rhs([f"k0_{m}" for m in comps], "rhs(t, state(x), u)")
     for i in range(1, 13):
         body += [f"a{i}_{j} = {a!r} * hs" for j, a in _RK78_ROWS[i]]
         xi = ", ".join(combo(f"a{i}_", _RK78_ROWS[i], m) for m in comps)
-        body.append(f"{', '.join(f'k{i}_{m}' for m in comps)}, = "
-                    f"_floats(rhs(t + {float(RK78_C[i])!r} * hs, state([{xi}]), u))")
+        body += _unpack_rhs([f"k{i}_{m}" for m in comps],
+                            f"rhs(t + {float(RK78_C[i])!r} * hs, state([{xi}]), u)")
     body += [f"e{m} = abs(k0_{m} + k10_{m} - k11_{m} - k12_{m})" for m in comps]
     body.append(f"if not _isfinite({' + '.join(f'e{m}' for m in comps)}):")
     body.append('    raise DaddyError("rk78: dynamics returned NaN or inf")')
@@ -314,8 +325,8 @@ def _dop853_step(nx: int):
     body.append(f"{', '.join(f'k0_{m}' for m in comps)}, = f")
     for i in range(1, _DOP_STAGES):
         xi = ", ".join(f"x{m} + {combo(_DOP_ROWS[i], m)} * h" for m in comps)
-        body.append(f"{', '.join(f'k{i}_{m}' for m in comps)}, = "
-                    f"_floats(rhs(t + {_dop.C[i]!r} * h, state([{xi}]), u))")
+        body += _unpack_rhs([f"k{i}_{m}" for m in comps],
+                            f"rhs(t + {_dop.C[i]!r} * h, state([{xi}]), u)")
     body += [f"y{m} = x{m} + {combo(_DOP_WEIGHTS, m)} * h" for m in comps]
     body.append(f"fn = _floats(rhs(t + h, state([{', '.join(f'y{m}' for m in comps)}]), u))")
     body += [f"s{m} = atol + max(abs(x{m}), abs(y{m})) * rtol" for m in comps]

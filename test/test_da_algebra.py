@@ -97,6 +97,23 @@ def test_batch_shapes_and_numpy_interop():
     assert bool(np.all(x[0] > 0.5))
 
 
+def test_vector_keeps_python_floats_as_a_list_and_stacks_everything_else():
+    """da.vector is stack for arrays and DA; Python floats stay the list (the single-state
+    integrators' working type), and a Dynamics called on such lists still returns an array."""
+    from daddy_core.catalogue import load_case
+    assert da.vector([1.0, 2.5]) == [1.0, 2.5]
+    for items in ([1.0, np.float64(2.0)], [np.ones(3), np.zeros(3)]):
+        out = da.vector(items)
+        assert isinstance(out, np.ndarray) and out.shape[0] == 2
+    x = da.variables([1.0, 2.0], order=2)
+    assert isinstance(da.vector([1.0, x[0]]), da.DA)
+    case = load_case("earth_mars")
+    dyn = case.rhs()
+    dx_list = dyn(0.0, case.x0.tolist(), [0.1, 0.0, 0.0])
+    assert isinstance(dx_list, np.ndarray)
+    np.testing.assert_array_equal(dx_list, dyn(0.0, case.x0, np.array([0.1, 0.0, 0.0])))
+
+
 def test_misuse_errors_name_the_problem():
     a = da.variables([1.0, 2.0], order=2)
     b = da.variables([1.0, 2.0, 3.0], order=2)

@@ -7,13 +7,13 @@
 """
 from .core import DA, constant, variables
 from .functions import (arctan, arctan2, concatenate, cons, cos, dot, exp, hypot, log, norm, sin,
-                        sqrt, stack, tan, where)
+                        sqrt, stack, tan, vector, where)
 from .maps import compose, evaluate, monomial_values, radius, shift
 from .monomials import tables
 
 __all__ = [
     "DA", "constant", "variables", "tables",
     "arctan", "arctan2", "concatenate", "cons", "cos", "dot", "exp", "hypot", "log", "norm",
-    "sin", "sqrt", "stack", "tan", "where",
+    "sin", "sqrt", "stack", "tan", "vector", "where",
     "compose", "evaluate", "monomial_values", "radius", "shift",
 ]

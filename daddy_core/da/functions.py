@@ -87,16 +87,25 @@ def dot(a, b):
     return s
 
 
-def stack(items, axis: int = 0):
-    """Stack floats, arrays and DA along a new ``axis`` (of the value shape)."""
-    if axis == 0 and items and type(items[0]) is float:
-        # Python floats (a scalar-component rhs on RK78's float path): their sum is a float,
-        # while a DA, array or numpy scalar among them makes it something else
+def vector(items):
+    """A right-hand side's value dx/dt from its components: ``stack(items)``, except that
+    components which are all Python floats stay the list ``items``.
+
+    Floats only: the rhs was called on lists of Python floats by a single-state float integrator
+    (``Dynamics.scalar_components``), which unpacks a list directly; an ndarray built from seven
+    floats and turned back into a list cost ~10 % of a solve. ``Dynamics.__call__`` still returns
+    an array for callers outside the integrators."""
+    if type(items[0]) is float:
         try:
-            if type(sum(items)) is float:
-                return np.array(items)
+            if type(sum(items)) is float:   # a DA, array or numpy scalar among them: not a float
+                return items
         except TypeError:
             pass
+    return stack(items)
+
+
+def stack(items, axis: int = 0):
+    """Stack floats, arrays and DA along a new ``axis`` (of the value shape)."""
     if DA not in map(type, items):   # (a C-level scan: 5x cheaper than isinstance per item)
         if axis == 0:   # the same array; np.stack's checks cost ~10x for a few scalars
             return np.array(items)

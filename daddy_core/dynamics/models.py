@@ -65,7 +65,7 @@ def two_body(gm: float, exhaust_speed: float):
     def rhs(t, x, u):
         k = (x[0] * x[0] + x[1] * x[1] + x[2] * x[2]) ** -1.5 * gm   # gm / r^3
         inv_m = 1.0 / x[6]
-        return dm.stack([x[3], x[4], x[5], u[0] * inv_m - x[0] * k, u[1] * inv_m - x[1] * k,
+        return dm.vector([x[3], x[4], x[5], u[0] * inv_m - x[0] * k, u[1] * inv_m - x[1] * k,
                          u[2] * inv_m - x[2] * k, _magnitude(u) * inv_c])
     return _indexed(rhs)
 
@@ -92,7 +92,7 @@ def cr3bp(mu: float, exhaust_speed: float):
         ax = x[4] * 2.0 + px - d1 * k1 - d2 * k2 + u[0] * inv_m
         ay = x[3] * -2.0 + py - py * ksum + u[1] * inv_m
         az = u[2] * inv_m - pz * ksum
-        return dm.stack([x[3], x[4], x[5], ax, ay, az, _magnitude(u) * inv_c])
+        return dm.vector([x[3], x[4], x[5], ax, ay, az, _magnitude(u) * inv_c])
     return _indexed(rhs)
 
 
@@ -123,7 +123,7 @@ def equinoctial(gm: float, exhaust_speed: float):
         dr = B * sam * g * sL * inv_psi * fn * 0.5
         ds = B * sam * g * cL * inv_psi * fn * 0.5
         dL = psi * psi / (B * B * B * a * sam) - B * sam * inv_psi * rc * fn
-        return dm.stack([da_, dp, dq, dr, ds, dL, _magnitude(u) * (-1.0 / exhaust_speed)])
+        return dm.vector([da_, dp, dq, dr, ds, dL, _magnitude(u) * (-1.0 / exhaust_speed)])
     return _indexed(rhs)
 
 

@@ -10,6 +10,8 @@ from __future__ import annotations
 from dataclasses import dataclass
 from typing import Callable, Optional
 
+import numpy as np
+
 
 @dataclass(frozen=True)
 class Dynamics:
@@ -19,7 +21,9 @@ class Dynamics:
         f: f(t, x, u) -> dx/dt, x (nx, *batch), u (nu, *batch) (floats, arrays or DA).
         scalar_components: f reads x and u only by integer index (``x[0]``, ``u[2]``), so the
             single-state float integrators may pass lists of Python floats, whose arithmetic
-            costs a third of numpy scalars'; False: f receives numpy arrays (always safe).
+            costs a third of numpy scalars' (return ``da.functions.vector([...])`` of the
+            components: on floats it stays a list, which those integrators unpack directly);
+            False: f receives numpy arrays (always safe).
         prepare_control: u -> u', applied once per integration (the control is constant over a
             stage), whose result f receives as u: what depends on the control only is then not
             recomputed at each Runge-Kutta stage (e.g. ``models.with_thrust_magnitude``).
@@ -30,8 +34,10 @@ class Dynamics:
     prepare_control: Optional[Callable] = None
 
     def __call__(self, t, x, u):
-        """dx/dt with the control prepared (for callers outside the integrators)."""
-        return self.f(t, x, self.prepared(u))
+        """dx/dt with the control prepared (for callers outside the integrators): an array
+        where ``f`` returns the list of floats ``da.functions.vector`` keeps for the integrators."""
+        dx = self.f(t, x, self.prepared(u))
+        return np.array(dx) if type(dx) is list else dx
 
     def prepared(self, u):
         """The control as ``f`` receives it during an integration."""
