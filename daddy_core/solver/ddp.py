@@ -79,11 +79,20 @@ class Stages:
         self.F = F if F is not None else expand_dynamics(problem, self.X[:-1], self.U,
                                                          problem.stage_dt)
         self.radius = da.radius(self.F, eps_da)
+        self._map_rows = None
         self._expand_costs()
 
     @property
     def n(self) -> int:
         return self.problem.nx + self.problem.nu
+
+    def map_rows(self) -> np.ndarray:
+        """(N, nx, M) the stage maps' coefficients, stage by stage contiguous: x_k+1 =
+        map_rows()[k] @ monomials(z) (the forward pass's Dyn evaluation). Built once per
+        nominal, shared by the line search's trials."""
+        if self._map_rows is None:
+            self._map_rows = np.ascontiguousarray(self.F.c.transpose(2, 1, 0))
+        return self._map_rows
 
     def _expand_costs(self):
         p = self.problem
@@ -326,32 +335,52 @@ class Trial:
 
 def forward_pass(st: Stages, gains: Gains, alpha: float, dyn: bool) -> Trial:
     """Roll the feedback law out for step length alpha (Alg. 6 / Alg. 8): stage k is served by
-    its stored map where [dx; du] lies inside the map's radius (Dyn, eq. 11), else integrated."""
+    its stored map where [dx; du] lies inside the map's radius (Dyn, eq. 11), else integrated.
+
+    The loop is sequential (x_k+1 depends on x_k) over arrays of a few elements, where each numpy
+    call costs more than its arithmetic: every step writes into preallocated rows (``out=``), the
+    maps are read from per-stage contiguous rows (``Stages.map_rows``), and a stage is checked by
+    its mass only (NaN or <= 0 ends the pass; a NaN elsewhere reaches the next stage's
+    integration, which raises, or the final check)."""
     p = st.problem
-    N, nx, nu = p.N, p.nx, p.nu
+    N, nx = p.N, p.nx
     X = np.empty((N + 1, nx))
-    U = np.empty((N, nu))
+    U = np.empty((N, p.nu))
     X[0] = p.x0
     poly = np.zeros(N, dtype=bool)
-    dz = np.zeros((nx + nu, N))
-    T, c = st.F.T, st.F.c
+    Z = np.zeros((N, st.n))                 # row k: [dx; du] of stage k
+    Xn, Un, b = st.X, st.U, gains.b
+    aa = alpha * gains.a
     im = p.mass_index
+    radius = st.radius if dyn else None
+    quad = st.F.T.k == 2
+    rows = st.map_rows() if dyn else None
+    mv = np.empty(st.F.T.size)
+    mv[0] = 1.0
+    n1, outer_a = st.n + 1, st.F.T.outer_a
     for k in range(N):
-        z = dz[:, k]
-        z[:nx] = X[k] - st.X[k]
-        z[nx:] = alpha * gains.a[k] + gains.b[k] @ z[:nx]
-        U[k] = st.U[k] + z[nx:]
-        if dyn and math.sqrt(z @ z) < st.radius[k]:                  # eq. 11, first case
-            X[k + 1] = c[:, :, k].T @ da.monomial_values(z, T)
+        z = Z[k]
+        zx, zu = z[:nx], z[nx:]
+        np.subtract(X[k], Xn[k], out=zx)
+        np.matmul(b[k], zx, out=zu)
+        zu += aa[k]
+        np.add(Un[k], zu, out=U[k])
+        if dyn and math.sqrt(z @ z) < radius[k]:                   # eq. 11, first case
+            if quad:
+                mv[1:n1] = z
+                np.take(np.multiply.outer(z, z), outer_a, out=mv[n1:])
+            else:
+                mv = da.monomial_values(z, st.F.T)
+            np.matmul(rows[k], mv, out=X[k + 1])
             poly[k] = True
         else:
             try:
                 X[k + 1] = p.stage_flow(X[k], U[k], k)
             except (DaddyError, ArithmeticError):   # incl. 1 / 0 on Python floats
-                return Trial(X, U, poly, dz, False, alpha)
-        if not math.isfinite(X[k + 1].sum()) or (im is not None and X[k + 1, im] <= 0.0):
-            return Trial(X, U, poly, dz, False, alpha)
-    return Trial(X, U, poly, dz, True, alpha)
+                return Trial(X, U, poly, Z.T, False, alpha)
+        if im is not None and not X[k + 1, im] > 0.0:
+            return Trial(X, U, poly, Z.T, False, alpha)
+    return Trial(X, U, poly, Z.T, bool(np.isfinite(X).all()), alpha)
 
 
 def new_maps(st: Stages, trial: Trial, dyn: bool) -> da.DA:
