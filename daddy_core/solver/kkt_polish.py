@@ -38,9 +38,6 @@ import time
 from dataclasses import dataclass
 
 import numpy as np
-import scipy.sparse as sp
-from scipy.linalg import LinAlgError
-from scipy.sparse.linalg import splu
 
 from .. import da
 from ..errors import DaddyError
@@ -97,7 +94,8 @@ def kkt_polish(problem: Problem, X, U, hom, opts: SolverOptions, optimality0: Op
             if step is not None:
                 model = every_constraint(problem, step[0], step[1])
                 new = optimality(problem, step[0], step[1], hom, model=model)
-        except (DaddyError, ArithmeticError, LinAlgError, ValueError, RuntimeError):
+        except (DaddyError, ArithmeticError, np.linalg.LinAlgError, ValueError,
+                RuntimeError):
             step = None
         if step is None or new is None:
             status = Status.KKT_NO_DESCENT
@@ -195,6 +193,8 @@ def _step(H: sp.csr_matrix, shift: float, D: sp.csr_matrix, c: np.ndarray, g: np
           ineq: np.ndarray, work: np.ndarray):
     """The working-set QP step dY and its multipliers (in D's rows, zero off the working set)
     (module docstring); (None, None) if the KKT matrix is singular."""
+    import scipy.sparse as sp   # (lazy, as in newton: import time)
+    from scipy.sparse.linalg import splu
     n = H.shape[0]
     work = work.copy()
     Hs = (H + shift * sp.identity(n, format="csr")) if shift else H
@@ -252,4 +252,5 @@ def _over_y(Hk: np.ndarray, Ht: np.ndarray, nx: int, nu: int) -> sp.csr_matrix:
     rows = np.concatenate([rows, np.repeat(xn, nx)])
     cc = np.concatenate([cc, np.tile(xn, nx)])
     vals = np.concatenate([Hk[keep], Ht.ravel()])
+    import scipy.sparse as sp
     return sp.csr_matrix((vals, (rows, cc)), shape=(N * w, N * w))

@@ -28,8 +28,6 @@ import time
 from dataclasses import dataclass
 
 import numpy as np
-import scipy.sparse as sp
-from scipy.linalg import LinAlgError, cho_solve_banded, cholesky_banded
 
 from .. import da
 from ..errors import DaddyError
@@ -127,6 +125,7 @@ class ConstraintModel:
             r += m
         self.n_rows = r
         rows, cols, vals = (np.concatenate(x) for x in zip(*parts))
+        import scipy.sparse as sp   # (lazy: scipy.sparse is ~60 % of the package's import time)
         self.D = sp.csr_matrix((vals, (rows, cols)), shape=(r, N * w))
 
     def inequality_rows(self) -> np.ndarray:
@@ -191,6 +190,7 @@ class BandedSigma:
 
     def __init__(self, D: sp.csr_matrix, reg: float | np.ndarray,
                  scale: np.ndarray | None = None):
+        from scipy.linalg import cholesky_banded
         if scale is not None:   # D sqrt(W): the columns scaled
             D = D.copy()
             D.data *= scale[D.indices]
@@ -207,11 +207,12 @@ class BandedSigma:
 
     def solve(self, b: np.ndarray) -> np.ndarray:
         """Sigma^{-1} b."""
+        from scipy.linalg import cho_solve_banded
         return cho_solve_banded((self.cb, False), b)
 
     def step(self, d: np.ndarray) -> np.ndarray:
         """dY = -W D^T Sigma^{-1} d, with self.D = D sqrt(W)."""
-        dY = -(self.D.T @ cho_solve_banded((self.cb, False), d))
+        dY = -(self.D.T @ self.solve(d))
         return dY if self.scale is None else dY * self.scale
 
 
@@ -334,7 +335,7 @@ def _factorise(model: ConstraintModel, scale: np.ndarray | None,
     for r in (reg, max(1e-8, 1e3 * reg)):
         try:
             return BandedSigma(model.D, r, scale)
-        except (LinAlgError, ValueError):
+        except (np.linalg.LinAlgError, ValueError):
             continue
     return None
 

@@ -31,7 +31,6 @@ import math
 from dataclasses import dataclass
 
 import numpy as np
-from scipy.linalg import LinAlgError
 
 from .. import da
 from ..errors import DaddyError
@@ -111,7 +110,7 @@ def optimality(problem: Problem, X: np.ndarray, U: np.ndarray, hom,
         g = model.residual()   # constraint values in D's row order
         ineq = model.inequality_rows()
         mu = _multipliers(model.D, c, g, ineq)
-    except (DaddyError, ArithmeticError, LinAlgError, ValueError):
+    except (DaddyError, ArithmeticError, np.linalg.LinAlgError, ValueError):
         return None
     if mu is None:
         return None
