@@ -22,7 +22,7 @@ import numpy as np
 
 from . import dop853_tableau as _dop
 from .da import functions as dm
-from .da.core import DA
+from .da.core import DA, _wrap
 from .dynamics.rhs import Dynamics, as_dynamics
 from .errors import DaddyError
 
@@ -57,20 +57,29 @@ _SINGLE_BATCH = 8   # float batches up to this size integrate state by state (_r
 
 class _Stages:
     """Stage derivatives k_i of one RK step in one buffer, so x + h * sum_j a_ij k_j is a single
-    BLAS contraction over the raw coefficient arrays (works for arrays and DA alike)."""
+    BLAS contraction over the raw coefficient arrays (works for arrays and DA alike).
+
+    A DA state (M, nx, *batch) is held component-major, (nx, M, *batch) in memory: the states
+    it hands to the right-hand side (``combine``) are views whose components x[i] are contiguous
+    (M, *batch) blocks, which numpy processes in one inner loop instead of M short ones (4x
+    cheaper per operation at B = 110); ``da.functions.stack`` builds the rhs's value in the same
+    layout, so ``push`` is a plain copy."""
 
     def __init__(self, x, n_stages: int):
         self.is_da = isinstance(x, DA)
-        raw = x.c if self.is_da else np.asarray(x)
+        raw = x.c.swapaxes(0, 1) if self.is_da else np.asarray(x)
         self.T = x.T if self.is_da else None
         self.buf = np.empty((n_stages,) + raw.shape, dtype=raw.dtype)
         self.raw = raw
         self.count = 0
 
     def push(self, k):
-        kr = k.c if self.is_da else np.asarray(k)
-        self.buf[self.count] = kr
+        self.buf[self.count] = k.c.swapaxes(0, 1) if self.is_da else k
         self.count += 1
+
+    def constant_parts(self) -> np.ndarray:
+        """(n_stages, nx, *batch) the float values of the k_i (a DA's constant parts)."""
+        return self.buf[:, :, 0] if self.is_da else self.buf
 
     def combine(self, x_raw, h, coeffs):
         """x + h * sum_j coeffs[j] k_j (h broadcast over the batch, the trailing axes)."""
@@ -78,10 +87,13 @@ class _Stages:
         if m == 0:
             out = x_raw
         else:
-            flat = self.buf[:m].reshape(m, -1)
-            acc = (np.asarray(coeffs) @ flat).reshape(x_raw.shape)
-            out = x_raw + acc * h
-        return DA(out, self.T) if self.is_da else out
+            if m == 1:   # one product (numpy's matmul of a single row is ~4x slower)
+                acc = self.buf[0] * float(coeffs[0])
+            else:
+                acc = (np.asarray(coeffs) @ self.buf[:m].reshape(m, -1)).reshape(x_raw.shape)
+            acc *= h
+            out = np.add(x_raw, acc, out=acc)
+        return _wrap(out.swapaxes(0, 1), self.T) if self.is_da else out
 
 
 _RK4_A = [[], [0.5], [0.0, 0.5], [0.0, 0.0, 1.0]]
@@ -116,7 +128,7 @@ def rk4(rhs, x, u, t0, dt, steps: int = 20):
         st.push(rhs(t + h, st.combine(xr, h, _RK4_A[3]), u))
         x = st.combine(xr, h, _RK4_B)
         t = t + h
-    return x
+    return _standard_layout(x)
 
 
 def rk78(rhs, x, u, t0, dt, tol: float = 1e-13, h0=None, max_steps: int = 10_000,
@@ -181,7 +193,7 @@ def rk78(rhs, x, u, t0, dt, tol: float = 1e-13, h0=None, max_steps: int = 10_000
         for i in range(13):
             st.push(rhs(t + RK78_C[i] * hs, st.combine(st.raw, hs, RK78_A[i]), u))
         x_new = st.combine(st.raw, hs, RK78_B)
-        kb = st.buf[:, 0] if st.is_da else st.buf
+        kb = st.constant_parts()
         err_vec = (kb[0] + kb[10] - kb[11] - kb[12]) * (RK78_ERR * hs)
         err = np.max(np.abs(err_vec), axis=0) if err_vec.ndim else np.abs(err_vec)
         if not np.all(np.isfinite(err)):
@@ -198,6 +210,15 @@ def rk78(rhs, x, u, t0, dt, tol: float = 1e-13, h0=None, max_steps: int = 10_000
     if stats is not None:
         stats["steps"] = n_steps
         stats["rhs_calls"] = 13 * n_steps
+    return _standard_layout(x)
+
+
+def _standard_layout(x):
+    """A DA state in the standard C-contiguous (M, nx, *batch) layout (the integrators work
+    component-major, ``_Stages``); one copy per integration, so the maps the solver keeps are
+    reshaped and sliced without further copies."""
+    if isinstance(x, DA) and not x.c.flags.c_contiguous:
+        return _wrap(np.ascontiguousarray(x.c), x.T)
     return x
 
 

@@ -113,7 +113,9 @@ def stack(items, axis: int = 0):
     ref = next(x for x in items if isinstance(x, DA))
     if axis == 0 and all(type(x) is DA and x.T is ref.T and x.c.shape == ref.c.shape
                          for x in items):   # the common case in dynamics: one call
-        return DA(np.stack([x.c for x in items], axis=1), ref.T)
+        # component-major in memory, (m, M, *batch) seen as (M, m, *batch): each component a
+        # contiguous block, as the integrators hold states (integrators._Stages)
+        return DA(np.stack([x.c for x in items]).swapaxes(0, 1), ref.T)
     coeffs = []
     shape = np.broadcast_shapes(*[(x.shape if isinstance(x, DA) else np.shape(x)) for x in items])
     for x in items:
