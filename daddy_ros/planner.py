@@ -21,7 +21,7 @@ import numpy as np
 from daddy_core.catalogue import load_case, problem_from_case
 from daddy_core.errors import DaddyError
 from daddy_core.problem import Problem
-from daddy_core.solver import Solution, WarmStart, solve
+from daddy_core.solver import Solution, WarmStart, preload, solve
 from daddy_core.solver.stage_maps import StageMaps, expand_dynamics
 
 from .assessment import Assessment, assess
@@ -69,6 +69,7 @@ class GuidancePlanner:
         self.checks = EstimateChecks(self.case, cfg.staleness_s, cfg.mass_tolerance_kg)
         self._lock = threading.Lock()
         self._plan: Plan | None = None
+        preload()   # the first re-plan must not pay scipy's import (~0.5 s)
 
     @property
     def method(self) -> str:

@@ -37,6 +37,15 @@ from .results import Status, StepResult, not_halved
 from .stage_maps import StageMaps, expand_dynamics
 
 
+def preload() -> None:
+    """Import what Newton and the KKT polishing load on first use (scipy.sparse, scipy.linalg,
+    scipy.sparse.linalg: ~0.4-0.6 s of CPU, most of this package's import cost, hence lazy).
+    A long-lived process whose first solve has a latency budget (the guidance node) calls it
+    at start-up; a one-shot script need not."""
+    import scipy.linalg  # noqa: F401
+    import scipy.sparse.linalg  # noqa: F401
+
+
 @dataclass
 class NewtonResult(StepResult):
     X: np.ndarray
