@@ -99,11 +99,41 @@ def test_equinoctial_matches_cartesian_with_rtn_thrust():
 
     T = 2.0
     xe = rk78(rhs_eq, x0, u_rtn, 0.0, T, tol=1e-13)
-    y0 = np.append(models.equinoctial_to_cartesian(x0), 1.0)
+    y0 = np.append(models.equinoctial_to_cartesian(x0, 1.0), 1.0)
     yc = reference(rhs_cart, y0, u_rtn, T)
-    np.testing.assert_allclose(models.equinoctial_to_cartesian(xe), yc[:6], atol=1e-9)
+    np.testing.assert_allclose(models.equinoctial_to_cartesian(xe, 1.0), yc[:6], atol=1e-9)
     np.testing.assert_allclose(xe[6], yc[6], atol=1e-12)
     assert units.vu_km_s == pytest.approx(0.48890, abs=1e-5)
+
+
+def test_earth_orbits_have_their_keplerian_period_and_secular_rate():
+    """Earth-centred physics in the catalogue's units: a ballistic LEO of 6778 km closes after
+    2 pi sqrt(a^3 / mu) = 5553 s (L advanced by exactly 2 pi, the other elements back where
+    they started; the units' gm is 4 pi^2, not 1), an eccentric GTO after its own period, and a
+    small tangential thrust raises a circular orbit at the Gauss-equation rate
+    da/dt = 2 a^(3/2) f / sqrt(mu) (f the acceleration)."""
+    from daddy_core.dynamics.units import MU_EARTH_KM3_S2
+    units = earth_units()
+    leo = load_case("leo_leo")
+    rhs = leo.rhs()
+    period_s = 2 * np.pi * np.sqrt(6778.0 ** 3 / MU_EARTH_KM3_S2)
+    assert period_s == pytest.approx(5553.0, abs=1.0)
+    for x0, a_km in ((leo.x0, 6778.0),
+                     (np.append(models.keplerian_to_equinoctial(
+                         24_505.9 / units.lu_km, 0.725, np.radians(7.0), 0.3, 0.5, 0.1), 1.0),
+                      24_505.9)):
+        T = units.time(2 * np.pi * np.sqrt(a_km ** 3 / MU_EARTH_KM3_S2))
+        x = rk78(rhs, x0, np.zeros(3), 0.0, float(T), tol=1e-13)
+        np.testing.assert_allclose(x[5] - x0[5], 2 * np.pi, rtol=1e-9)
+        np.testing.assert_allclose(x[:5], x0[:5], rtol=0, atol=1e-9)
+    thrust_n = 0.5
+    x0 = np.append(models.keplerian_to_equinoctial(7000.0 / units.lu_km, 0.0, 0.3, 0.0, 0.0, 0.0),
+                   1.0)
+    T = float(units.time(2 * np.pi * np.sqrt(7000.0 ** 3 / MU_EARTH_KM3_S2)))
+    x = rk78(rhs, x0, np.array([0.0, float(units.thrust(thrust_n)), 0.0]), 0.0, T, tol=1e-13)
+    f_km_s2 = thrust_n / 1000.0 / 1000.0   # N on 1000 kg -> km / s^2
+    da_km = 2 * 7000.0 ** 1.5 * f_km_s2 / np.sqrt(MU_EARTH_KM3_S2) * units.time_s(T)
+    assert (x[0] - x0[0]) * units.lu_km == pytest.approx(da_km, rel=2e-3)
 
 
 def test_integrator_errors():

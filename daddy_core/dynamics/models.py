@@ -135,8 +135,9 @@ def keplerian_to_equinoctial(a, e, i_rad, raan_rad, argp_rad, nu_rad):
                      t * np.cos(raan_rad), lp + nu_rad])
 
 
-def equinoctial_to_cartesian(x, gm: float = 1.0):
-    """[a, p, q, r, s, L] -> position and velocity (6,), for plotting and checks."""
+def equinoctial_to_cartesian(x, gm: float):
+    """[a, p, q, r, s, L] -> position and velocity (6,), for plotting and checks; gm in the
+    units of a (no default: in the catalogue's Earth units it is 4 pi^2, not 1)."""
     a, p, q, r, s, L = x[:6]
     e2 = p * p + q * q
     sl = a * (1.0 - e2)

@@ -135,10 +135,14 @@ def earth_moon_units(mass_kg: float = 1000.0) -> Units:
 
 
 def earth_units(mass_kg: float = 1000.0) -> Units:
-    """Paper Table 10: TU = 1 mean solar day, LU = (mu (TU / 2 pi)^2)^(1/3) (geosynchronous)."""
+    """Paper Table 10: TU = 1 mean solar day, LU = (mu (TU / 2 pi)^2)^(1/3) (geosynchronous).
+
+    In these units the Earth's gravitational parameter is mu TU^2 / LU^3 = 4 pi^2 (an orbit of
+    radius 1 LU has a period of 1 TU), not 1: the units are not the canonical ones in which
+    mu = 1, so gm is derived here from its definition rather than assumed."""
     tu = DAY_S
     lu = (MU_EARTH_KM3_S2 * (tu / (2 * math.pi)) ** 2) ** (1.0 / 3.0)
-    return Units("earth_equinoctial", lu, tu, mass_kg, 1.0)
+    return Units("earth_equinoctial", lu, tu, mass_kg, MU_EARTH_KM3_S2 * tu ** 2 / lu ** 3)
 
 
 def unit_units() -> Units:
