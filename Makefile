@@ -14,7 +14,9 @@ PIP := $(PY) -m pip install --disable-pip-version-check -q -c requirements/pins.
 
 # Every rclpy process: discovery on loopback only, a per-run domain, logs in a temp dir.
 export ROS_AUTOMATIC_DISCOVERY_RANGE := LOCALHOST
-export ROS_DOMAIN_ID ?= $(shell echo $$(( $$$$ % 100 + 100 )))
+# (a domain id from 1-101: the ROS 2 documentation's safe range on Linux; higher ids map to
+# ports inside the ephemeral range; 0, the default, is left to other users of the machine)
+export ROS_DOMAIN_ID ?= $(shell echo $$(( $$$$ % 101 + 1 )))
 export ROS_LOG_DIR ?= $(shell mktemp -d /tmp/daddy-roslog.XXXXXX)
 export ROS_PYTHON_CHECK_FIELDS := 1
 
