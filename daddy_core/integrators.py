@@ -180,11 +180,17 @@ def rk78(rhs, x, u, t0, dt, tol: float = 1e-13, h0=None, max_steps: int = 10_000
     h = np.abs(dt) / 8.0 if h0 is None else np.broadcast_to(np.abs(np.asarray(h0, float)), batch).copy()
     h = np.where(h > 0, h, 1.0)
     n_steps = 0
+    arrived = _Arrived(x) if len(batch) == 1 else None
     while True:
         remaining = np.abs(t_end - t)
         active = remaining > 1e-15 * np.maximum(1.0, np.abs(t_end))
         if not np.any(active):
             break
+        if arrived is not None and active.sum() <= _COMPACT_SHARE * active.size:
+            keep = np.flatnonzero(active)
+            x, u = arrived.leave(x, u, keep)
+            t, t_end, direction, h, dt, active, remaining = (
+                v[keep] for v in (t, t_end, direction, h, dt, active, remaining))
         n_steps += 1
         if n_steps > max_steps:
             raise DaddyError(f"rk78 exceeded max_steps={max_steps} (stiff or singular dynamics?)")
@@ -210,7 +216,49 @@ def rk78(rhs, x, u, t0, dt, tol: float = 1e-13, h0=None, max_steps: int = 10_000
     if stats is not None:
         stats["steps"] = n_steps
         stats["rhs_calls"] = 13 * n_steps
-    return _standard_layout(x)
+    return _standard_layout(x if arrived is None else arrived.result(x))
+
+
+# the batch drops its arrived elements when at most this share of it is still integrating
+_COMPACT_SHARE = 0.9
+
+
+class _Arrived:
+    """The batched RK78's elements that have reached their final time, kept out of its steps.
+
+    Each batch element takes its own steps, and the batch loops until the slowest arrives: a
+    stage that needs 18 steps (a perilune pass) made every stage of an NRHO batch take 18 at
+    full cost, 10x their own 1.7 on average. When the still-integrating share falls to
+    ``_COMPACT_SHARE``, the arrived elements are stored here and the loop goes on with the
+    others (a gather per compaction; every element's arithmetic is unchanged)."""
+
+    def __init__(self, x):
+        self.full = _wrap(x.c.copy(), x.T) if isinstance(x, DA) else np.array(x)
+        self.B = self.full.shape[-1]
+        self.index = np.arange(self.B)      # where the current batch's elements belong
+
+    def leave(self, x, u, keep: np.ndarray):
+        """(x, u) of the elements ``keep`` (indices into the current batch); the others' final
+        states are stored. u keeps its shape where it does not carry the batch axis."""
+        self._store(x)
+        n = self.index.size
+        self.index = self.index[keep]
+        take = (lambda v: _wrap(v.c[..., keep], v.T)) if isinstance(x, DA) else (
+            lambda v: v[..., keep])
+        if u is not None and len(u.shape) >= 2 and u.shape[-1] == n:
+            u = _wrap(u.c[..., keep], u.T) if isinstance(u, DA) else np.asarray(u)[..., keep]
+        return take(x), u
+
+    def result(self, x):
+        """The whole batch's final states, x the current batch's."""
+        self._store(x)
+        return self.full
+
+    def _store(self, x):
+        if isinstance(x, DA):
+            self.full.c[..., self.index] = x.c
+        else:
+            self.full[..., self.index] = x
 
 
 def _standard_layout(x):

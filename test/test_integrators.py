@@ -4,6 +4,7 @@ import numpy as np
 import pytest
 from scipy.integrate import solve_ivp
 
+from daddy_core import da
 from daddy_core.dynamics import Dynamics, models
 from daddy_core.dynamics.units import earth_units
 from daddy_core.errors import DaddyError
@@ -57,6 +58,34 @@ def test_batched_rk78_with_different_stage_lengths(B):
     xb = rk78(rhs, X, U, 0.0, dts, tol=1e-13)
     for j in range(B):
         np.testing.assert_allclose(xb[:, j], reference(rhs, case.x0, np.zeros(3), dts[j]), atol=1e-11)
+
+
+def test_batched_da_rk78_drops_arrived_stages_without_changing_any():
+    """A batch whose stages need very different step counts (an NRHO stage through perilune
+    takes many, the rest one or two): the elements that have arrived leave the batch
+    (integrators._Arrived); every element's expansion is the one it gets integrated alone (to
+    round-off: small batches take another product kernel), and the step count is the slowest
+    element's."""
+    case = load_case("nrho_dro")
+    rhs = case.rhs()
+    dt = case.tof / 150
+    # 16 stages of the coast from the NRHO's start: 21-24 pass perilune (3-15 steps at 1e-8)
+    starts = [21, 22, 23, 24] + list(range(0, 120, 10))
+    X = np.stack([rk78(rhs, case.x0, np.zeros(3), 0.0, k * dt, tol=1e-13) for k in starts],
+                 axis=1)
+    U = np.full((3, X.shape[1]), 1e-7)
+    z = da.variables(np.concatenate([X, U]), order=2)
+    dts = np.full(X.shape[1], dt)
+    stats = {}
+    F = rk78(rhs, z[:7], z[7:], 0.0, dts, tol=1e-8, h0=dts, stats=stats)
+    alone = []
+    for j in range(X.shape[1]):
+        s = {}
+        zj = da.variables(np.concatenate([X[:, j], U[:, j]]), order=2)
+        Fj = rk78(rhs, zj[:7], zj[7:], 0.0, dts[j], tol=1e-8, h0=dts[j], stats=s)
+        alone.append(s["steps"])
+        np.testing.assert_allclose(F.c[..., j], Fj.c, rtol=0, atol=1e-12 * np.abs(Fj.c).max())
+    assert stats["steps"] == max(alone) and max(alone) >= 3 * min(alone)
 
 
 @pytest.mark.parametrize("name", ["earth_mars", "halo_l2_l1", "leo_leo"])
