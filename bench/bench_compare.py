@@ -9,7 +9,8 @@ two computed the same thing.
 
 Workloads: the solver's bench cases (CPU per solve and per DDP iteration), batched stage
 expansions (CR3BP, RK78, order 2, 10 variables) at B = 1, 10, 110 stages (us per stage), single
-and batched map evaluation, and ``import daddy_core.cli``. One core per process
+and batched map evaluation, warm re-plans (``bench_replan``'s perturbed states, wall time of the solve) and
+``import daddy_core.cli``. One core per process
 (OPENBLAS_NUM_THREADS=1).
 """
 from __future__ import annotations
@@ -82,6 +83,25 @@ import daddy_core.cli  # noqa: F401
 print(json.dumps({"import daddy_core.cli s (after interpreter start)": [time.process_time() - c0, ""]}))
 """
 
+_REPLAN = """
+import json, os, statistics, sys
+sys.path.insert(0, os.path.join(os.environ["PYTHONPATH"], "bench"))
+import numpy as np
+from bench_replan import PERTURB, perturbed_state
+from daddy_ros.demo import nominal_planner
+out = {}
+for case in ("earth_mars", "halo_l2_l1"):
+    times = []
+    for i in range(5):
+        planner, _ = nominal_planner(case, 600.0)
+        p, v, m, t = perturbed_state(case, planner, np.random.default_rng(i), *PERTURB[case])
+        o = planner.replan(p, v, m, t, f"w{i}", now_s=t)
+        times.append(o.solve_time_s * 1e3)
+    out[f"warm re-plan {case} ms (median of 5)"] = [
+        statistics.median(times), f"{o.plan.solution.final_mass_kg:.6f} kg, {o.iterations}"]
+print(json.dumps(out))
+"""
+
 QUICK_CASES = [("earth_mars", "energy"), ("earth_mars", "fuel")]
 ALL_CASES = QUICK_CASES + [("halo_l2_l1", "fuel"), ("dro_dro", "fuel")]
 
@@ -106,7 +126,7 @@ def main() -> None:
     from bench_da import machine
     print(f"machine: {machine()}; {args.rounds} interleaved rounds, one process per run")
     print(f"base {args.base}\nnew  {args.new}")
-    jobs = [(_IMPORT, []), (_EXPAND, [])] + [
+    jobs = [(_IMPORT, []), (_EXPAND, []), (_REPLAN, [])] + [
         (_SOLVE, [c, f]) for c, f in (ALL_CASES if args.all else QUICK_CASES)]
     samples: dict[str, dict[str, list]] = {}
     for r in range(args.rounds):
