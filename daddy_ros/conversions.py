@@ -3,6 +3,7 @@ from __future__ import annotations
 
 import array
 import math
+from dataclasses import dataclass
 
 import numpy as np
 from builtin_interfaces.msg import Duration, Time
@@ -12,6 +13,7 @@ from nav_msgs.msg import Odometry, Path
 from std_msgs.msg import Header
 from trajectory_msgs.msg import JointTrajectory, JointTrajectoryPoint
 
+from .checks import InputRejected
 from .plan import Level, Plan
 
 JOINT_NAMES = ["thrust_x", "thrust_y", "thrust_z"]
@@ -36,12 +38,68 @@ def s_to_duration(s: float) -> Duration:
     return Duration(sec=sec, nanosec=min(int(round((s - sec) * 1e9)), 999_999_999))
 
 
-def odometry_to_state(msg: Odometry):
-    """(position m (3,), velocity m/s (3,), stamp s, frame_id) from an Odometry."""
-    p = msg.pose.pose.position
-    v = msg.twist.twist.linear
-    return (np.array([p.x, p.y, p.z], dtype=float), np.array([v.x, v.y, v.z], dtype=float),
-            stamp_to_s(msg.header.stamp), msg.header.frame_id)
+# a pose orientation used to rotate a body-frame twist must be a unit quaternion to this
+QUATERNION_NORM_TOL = 1e-3
+
+
+@dataclass(frozen=True)
+class OdometryState:
+    """A state estimate read from an Odometry as its definition says (msg_docs/state_estimate.md):
+    position and velocity in ``header.frame_id`` [m, m/s], the stamp [s], and the RMS 1-sigma of
+    the position and of the linear velocity from the covariances (None: not given)."""
+
+    pos_m: np.ndarray
+    vel_m_s: np.ndarray
+    stamp_s: float
+    frame_id: str
+    pos_sigma_m: float | None
+    vel_sigma_m_s: float | None
+
+
+def odometry_to_state(msg: Odometry) -> OdometryState:
+    """Read an Odometry: the pose is in ``header.frame_id``, the twist in ``child_frame_id``
+    (nav_msgs/Odometry's definition). A twist in another frame than the header's -- the body
+    frame of a standard estimator -- is rotated into it by the pose orientation (body to header
+    frame); an empty ``child_frame_id`` or the header's own frame means it is there already.
+    Raises InputRejected naming the field for an orientation that is not a unit quaternion
+    (when it is needed) and for a covariance that is given but not finite and positive
+    definite on its position / linear-velocity block."""
+    p, v, q = msg.pose.pose.position, msg.twist.twist.linear, msg.pose.pose.orientation
+    pos = np.array([p.x, p.y, p.z], dtype=float)
+    vel = np.array([v.x, v.y, v.z], dtype=float)
+    if msg.child_frame_id not in ("", msg.header.frame_id):
+        vel = _rotation(np.array([q.w, q.x, q.y, q.z], dtype=float)) @ vel
+    return OdometryState(pos, vel, stamp_to_s(msg.header.stamp), msg.header.frame_id,
+                         _sigma(msg.pose.covariance, "state_estimate.pose.covariance"),
+                         _sigma(msg.twist.covariance, "state_estimate.twist.covariance"))
+
+
+def _rotation(q: np.ndarray) -> np.ndarray:
+    """The rotation matrix (3, 3) of the quaternion q = [w, x, y, z] (body -> frame)."""
+    norm = float(np.sqrt(q @ q))
+    if not (math.isfinite(norm) and abs(norm - 1.0) <= QUATERNION_NORM_TOL):
+        raise InputRejected(
+            f"state_estimate.pose.pose.orientation is not a unit quaternion (norm {norm:.6g}): "
+            "it is needed to rotate the twist from child_frame_id into header.frame_id")
+    w, x, y, z = q / norm
+    return np.array([[1 - 2 * (y * y + z * z), 2 * (x * y - w * z), 2 * (x * z + w * y)],
+                     [2 * (x * y + w * z), 1 - 2 * (x * x + z * z), 2 * (y * z - w * x)],
+                     [2 * (x * z - w * y), 2 * (y * z + w * x), 1 - 2 * (x * x + y * y)]])
+
+
+def _sigma(cov, field: str) -> float | None:
+    """RMS 1-sigma sqrt(trace / 3) of the linear block of a 6 x 6 row-major covariance; None
+    when it is not given (all zeros, or -1 first as sensor_msgs marks an unknown one)."""
+    c = np.asarray(cov, dtype=float)
+    if not c.any() or c[0] == -1.0:
+        return None
+    block = c.reshape(6, 6)[:3, :3]
+    if not np.all(np.isfinite(block)):
+        raise InputRejected(f"{field} has non-finite entries in its linear block")
+    if np.min(np.linalg.eigvalsh(0.5 * (block + block.T))) <= 0.0:
+        raise InputRejected(f"{field} is not positive definite on its linear block "
+                            f"(diagonal {np.diag(block).tolist()})")
+    return float(np.sqrt(np.trace(block) / 3.0))
 
 
 def state_to_odometry(pos_m, vel_m_s, stamp_s: float, frame_id: str) -> Odometry:

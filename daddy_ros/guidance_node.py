@@ -135,17 +135,18 @@ class GuidanceNode(Node):
                    stamp if math.isfinite(stamp) and stamp > 0 else None, log_every_s=1.0)
 
     def _on_state(self, msg: Odometry):
-        pos, vel, stamp, frame = cv.odometry_to_state(msg)
+        stamp, frame = cv.stamp_to_s(msg.header.stamp), msg.header.frame_id
         if frame != self.frame_id:
             self._reject("state_estimate", f"state_estimate.header.frame_id {frame!r} is not "
                          f"{self.frame_id!r}", stamp)
             return
         try:
-            self.planner.checks.check_estimate(pos, vel, stamp)
+            est = cv.odometry_to_state(msg)
+            self.planner.checks.check_estimate(est.pos_m, est.vel_m_s, stamp)
         except InputRejected as exc:
             self._reject("state_estimate", str(exc), stamp)
             return
-        self.queue.add_state(pos, vel, stamp)
+        self.queue.add_state(est.pos_m, est.vel_m_s, stamp, est.pos_sigma_m, est.vel_sigma_m_s)
         plan = self.planner.plan or self._adopt_nominal()
         if plan is not None:
             self.pub_thrust.publish(cv.thrust_command(plan.thrust_at(stamp), stamp, self.frame_id))
@@ -253,6 +254,10 @@ class GuidanceNode(Node):
             return
         pos, vel, stamp = state.pos_m, state.vel_m_s, state.stamp_s
         started["state_stamp_s"] = f"{stamp:.9f}"
+        for key, sigma in (("state_position_sigma_m", state.pos_sigma_m),
+                           ("state_velocity_sigma_m_s", state.vel_sigma_m_s)):
+            if sigma is not None:   # from the estimate's covariances, where it gave them
+                started[key] = f"{sigma:.6g}"
         try:
             out = self.planner.replan(pos, vel, mass, stamp, request_id,
                                       now_s=request_stamp)

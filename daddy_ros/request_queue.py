@@ -25,11 +25,14 @@ ESTIMATE_WAIT_S = 0.5
 
 @dataclass(frozen=True)
 class Estimate:
-    """An accepted state estimate (SI)."""
+    """An accepted state estimate (SI): position, velocity, stamp, and the RMS 1-sigma of its
+    position and velocity where its covariances gave them."""
 
     pos_m: object
     vel_m_s: object
     stamp_s: float
+    pos_sigma_m: float | None = None
+    vel_sigma_m_s: float | None = None
 
 
 @dataclass(frozen=True)
@@ -58,9 +61,10 @@ class RequestQueue:
         self.last = (Level.ERROR, "no solve yet", False)   # (level, reason, new plan stored)
 
     # ------------------------------------------------------------------ estimates
-    def add_state(self, pos_m, vel_m_s, stamp_s: float) -> None:
+    def add_state(self, pos_m, vel_m_s, stamp_s: float, pos_sigma_m: float | None = None,
+                  vel_sigma_m_s: float | None = None) -> None:
         with self.cond:
-            self._states.append(Estimate(pos_m, vel_m_s, stamp_s))
+            self._states.append(Estimate(pos_m, vel_m_s, stamp_s, pos_sigma_m, vel_sigma_m_s))
             self.cond.notify_all()
 
     def add_mass(self, stamp_s: float, mass_kg: float) -> None:

@@ -192,14 +192,61 @@ def test_persistence_round_trip_and_bad_files(planner, tmp_path):
         other.restore_plan(path)
 
 
+def test_odometry_twist_is_read_in_child_frame_and_covariances_checked():
+    """nav_msgs/Odometry: the twist is in child_frame_id. A body-frame twist is rotated into
+    header.frame_id by the pose orientation; one in the header's own frame (or an empty child
+    frame) is taken as it is; an orientation that is not a unit quaternion, or a covariance
+    that is given but not finite and positive definite, is refused naming the field."""
+    cv = pytest.importorskip("daddy_ros.conversions")
+    from daddy_ros.checks import InputRejected
+    v_inertial = np.array([1200.0, -350.0, 80.0])
+    angle = 0.7   # body frame rotated by 0.7 rad about z, then 0.3 rad about the new x
+    qz = np.array([np.cos(angle / 2), 0.0, 0.0, np.sin(angle / 2)])
+    qx = np.array([np.cos(0.15), np.sin(0.15), 0.0, 0.0])
+    w1, x1, y1, z1 = qz
+    w2, x2, y2, z2 = qx
+    q = np.array([w1 * w2 - x1 * x2 - y1 * y2 - z1 * z2, w1 * x2 + x1 * w2 + y1 * z2 - z1 * y2,
+                  w1 * y2 - x1 * z2 + y1 * w2 + z1 * x2, w1 * z2 + x1 * y2 - y1 * x2 + z1 * w2])
+    c, s = np.cos(angle), np.sin(angle)
+    Rz = np.array([[c, -s, 0], [s, c, 0], [0, 0, 1]])
+    Rx = np.array([[1, 0, 0], [0, np.cos(0.3), -np.sin(0.3)], [0, np.sin(0.3), np.cos(0.3)]])
+    v_body = (Rz @ Rx).T @ v_inertial
+    msg = cv.state_to_odometry([1e11, 2e10, 0.0], v_body, 50.0, "sun_ecliptic")
+    msg.child_frame_id = "body"
+    (msg.pose.pose.orientation.w, msg.pose.pose.orientation.x, msg.pose.pose.orientation.y,
+     msg.pose.pose.orientation.z) = map(float, q)
+    np.testing.assert_allclose(cv.odometry_to_state(msg).vel_m_s, v_inertial, rtol=1e-12)
+    for child in ("", "sun_ecliptic"):   # the twist is in the header frame already
+        msg.child_frame_id = child
+        np.testing.assert_allclose(cv.odometry_to_state(msg).vel_m_s, v_body, rtol=0)
+    msg.child_frame_id = "body"
+    msg.pose.pose.orientation.w = msg.pose.pose.orientation.x = 0.0
+    msg.pose.pose.orientation.y = msg.pose.pose.orientation.z = 0.0
+    with pytest.raises(InputRejected, match="pose.pose.orientation is not a unit quaternion"):
+        cv.odometry_to_state(msg)
+    msg.pose.pose.orientation.w = 1.0
+    cov = np.zeros((6, 6))
+    cov[:3, :3] = np.diag([4.0, 9.0, 16.0])   # sigma 2, 3, 4 m
+    msg.pose.covariance = cov.ravel().tolist()
+    est = cv.odometry_to_state(msg)
+    assert est.pos_sigma_m == pytest.approx(np.sqrt(29.0 / 3.0)) and est.vel_sigma_m_s is None
+    for bad, what in ((np.nan, "non-finite"), (-1.0, "not positive definite")):
+        cov[1, 1] = bad
+        msg.pose.covariance = cov.ravel().tolist()
+        with pytest.raises(InputRejected, match=f"state_estimate.pose.covariance.*{what}|"
+                                                f"state_estimate.pose.covariance is {what}"):
+            cv.odometry_to_state(msg)
+
+
 def test_message_conversions_round_trip(planner):
     cv = pytest.importorskip("daddy_ros.conversions")
     plan = planner.plan
     msg = cv.state_to_odometry(plan.states_si[0, :3], plan.states_si[0, 3:6], 1234.5, "f")
-    pos, vel, stamp, frame = cv.odometry_to_state(msg)
-    np.testing.assert_allclose(pos, plan.states_si[0, :3])
-    np.testing.assert_allclose(vel, plan.states_si[0, 3:6])
-    assert stamp == pytest.approx(1234.5) and frame == "f"
+    est = cv.odometry_to_state(msg)
+    np.testing.assert_allclose(est.pos_m, plan.states_si[0, :3])
+    np.testing.assert_allclose(est.vel_m_s, plan.states_si[0, 3:6])
+    assert est.stamp_s == pytest.approx(1234.5) and est.frame_id == "f"
+    assert est.pos_sigma_m is None and est.vel_sigma_m_s is None   # no covariance given
     # a schedule published mid-plan starts at the stage containing from_s
     from_s = plan.epoch_s + plan.stage_dt_s[0] * 1.5
     traj = cv.plan_to_joint_trajectory(plan, "f", from_s)

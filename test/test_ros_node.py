@@ -90,7 +90,32 @@ def test_nominal_then_replan_publishes_valid_schedule(graph):
     assert np.all(np.diff(starts) > 0) and starts[0] == pytest.approx(0.0)
 
 
-@pytest.mark.parametrize("case", ["nan", "frame", "negative_mass", "inside_sun", "unset_stamp"])
+def _body_frame_odometry(pos, vel_inertial, stamp, yaw):
+    """An Odometry as a standard estimator sends it: the twist in the body frame (child
+    'spacecraft'), rotated by ``yaw`` about z from the header frame, with that orientation."""
+    c, s = math.cos(yaw), math.sin(yaw)
+    v_body = np.array([[c, s, 0.0], [-s, c, 0.0], [0.0, 0.0, 1.0]]) @ vel_inertial
+    msg = cv.state_to_odometry(pos, v_body, stamp, FRAME)
+    msg.pose.pose.orientation.w, msg.pose.pose.orientation.z = math.cos(yaw / 2), math.sin(yaw / 2)
+    return msg
+
+
+def test_body_frame_twist_is_rotated_into_the_header_frame(graph):
+    node, c = graph
+    pos, vel, mass = truth_at_start()
+    t = node.planner.plan.epoch_s + 5.0
+    msg = _body_frame_odometry(pos, vel, t, yaw=2.1)
+    msg.pose.covariance = np.diag([1e6, 1e6, 1e6, 0, 0, 0]).ravel().tolist()   # sigma 1 km
+    c.pub_state.publish(msg)
+    got = c.wait_for(lambda: (s := node.queue.state_for(None)) is not None
+                     and abs(s.stamp_s - t) < 1e-6 and s, 10)
+    assert got, "the body-frame estimate was not accepted"
+    np.testing.assert_allclose(got.vel_m_s, vel, rtol=1e-12)
+    assert got.pos_sigma_m == pytest.approx(1000.0) and got.vel_sigma_m_s is None
+
+
+@pytest.mark.parametrize("case", ["nan", "frame", "negative_mass", "inside_sun", "unset_stamp",
+                                  "orientation", "covariance"])
 def test_malformed_estimates_rejected_at_arrival_and_plan_kept(graph, case):
     node, c = graph
     plan_before = node.planner.plan
@@ -99,7 +124,8 @@ def test_malformed_estimates_rejected_at_arrival_and_plan_kept(graph, case):
     t = plan_before.epoch_s + 10.0
     n0 = len(c.diags)
     expect = {"nan": "position", "frame": "frame_id", "negative_mass": "inertia.m",
-              "inside_sun": "heliocentric", "unset_stamp": "header.stamp"}[case]
+              "inside_sun": "heliocentric", "unset_stamp": "header.stamp",
+              "orientation": "pose.pose.orientation", "covariance": "twist.covariance"}[case]
     if case == "nan":
         c.publish_estimate(pos * math.nan, vel, mass, t)
     elif case == "frame":
@@ -110,6 +136,14 @@ def test_malformed_estimates_rejected_at_arrival_and_plan_kept(graph, case):
         c.publish_estimate(pos * 1e-3, vel, mass, t)
     elif case == "unset_stamp":
         c.publish_estimate(pos, vel, mass, 0.0)
+    elif case in ("orientation", "covariance"):
+        msg = _body_frame_odometry(pos, vel, t, yaw=0.4)
+        if case == "orientation":   # a body-frame twist without a usable orientation
+            msg.pose.pose.orientation.w = msg.pose.pose.orientation.z = 0.0
+        else:
+            msg.twist.covariance = np.diag([1.0, math.inf, 1.0, 0, 0, 0]).ravel().tolist()
+        c.send_mass(mass, t)
+        c.pub_state.publish(msg)
     got = c.wait_for(lambda: [d.status[0] for _, d in c.diags[n0:]
                               if expect in d.status[0].message], 10)
     assert got, f"no diagnostic naming {expect!r}"
