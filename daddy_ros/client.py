@@ -12,6 +12,7 @@ import time
 
 from diagnostic_msgs.msg import DiagnosticArray
 from geometry_msgs.msg import InertiaStamped, Vector3Stamped
+from lifecycle_msgs.srv import ChangeState, GetState
 from nav_msgs.msg import Odometry
 from rcl_interfaces.srv import GetParameters, SetParameters
 from rclpy.node import Node
@@ -40,16 +41,23 @@ class GuidanceClient:
         cond: the condition guarding them (``wait_for`` waits on it).
     """
 
-    def __init__(self, frame_id: str, name: str = "daddy_client", node: str = NODE_NAME):
+    def __init__(self, frame_id: str, name: str = "daddy_client", node: str = NODE_NAME,
+                 namespace: str = ""):
+        """``namespace``: the guidance node's (this client joins it, so the relative topic
+        names meet)."""
         self.frame_id = frame_id
-        self.node = Node(name)
+        self.node = Node(name, namespace=namespace or None)
         n = self.node
+        node = f"{namespace.rstrip('/')}/{node}" if namespace else node
         self.pub_state = n.create_publisher(Odometry, "state_estimate", RELIABLE)
         self.pub_mass = n.create_publisher(InertiaStamped, "mass_estimate", RELIABLE)
         self.pub_req = n.create_publisher(Header, "replan_request", RELIABLE)
-        self.trigger = n.create_client(Trigger, f"/{node}/replan")
-        self.set_params = n.create_client(SetParameters, f"/{node}/set_parameters")
-        self.get_params = n.create_client(GetParameters, f"/{node}/get_parameters")
+        node = node if node.startswith("/") else f"/{node}"
+        self.trigger = n.create_client(Trigger, f"{node}/replan")
+        self.set_params = n.create_client(SetParameters, f"{node}/set_parameters")
+        self.get_params = n.create_client(GetParameters, f"{node}/get_parameters")
+        self.change_state = n.create_client(ChangeState, f"{node}/change_state")
+        self.get_state = n.create_client(GetState, f"{node}/get_state")
         self.cond = threading.Condition()
         self.schedules, self.diags, self.thrust = [], [], []
         self._parsed = (None, None)   # (the newest schedule message, its conversion)

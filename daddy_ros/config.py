@@ -70,6 +70,9 @@ class PlannerConfig:
 class NodeConfig:
     """The node's frame, files and topic names."""
 
+    autostart: bool = _param(True, "configure and activate at start-up (a plain `ros2 run`); "
+                                   "false: an external lifecycle manager drives the "
+                                   "transitions through the standard lifecycle services")
     frame_id: str = _param("earth_moon_rotating", "frame of state estimates and thrust")
     plan_file: str = _param("", "nominal plan (solution JSON) adopted at the first estimate; "
                                 "empty: the bundled nominal of the scenario if any, else a cold "

@@ -22,10 +22,12 @@ from nav_msgs.msg import Path as PathMsg
 from rcl_interfaces.msg import ParameterDescriptor, SetParametersResult
 from rclpy.callback_groups import MutuallyExclusiveCallbackGroup, ReentrantCallbackGroup
 from rclpy.executors import SingleThreadedExecutor
+from rclpy.lifecycle import LifecycleNode, State, TransitionCallbackReturn
 from rclpy.node import Node
 from rclpy.qos import (DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy,
                        qos_profile_sensor_data)
 from rclpy.signals import SignalHandlerOptions
+from rclpy.subscription import Subscription
 from std_msgs.msg import Header
 from std_srvs.srv import Trigger
 from trajectory_msgs.msg import JointTrajectory
@@ -51,49 +53,129 @@ NAMES = {p.name for p in parameters()}
 RUNTIME = {p.name for p in parameters() if p.runtime}   # time_budget_s, staleness_s
 
 
-class GuidanceNode(Node):
-    def __init__(self, service_node: Node | None = None, **overrides):
+class GuidanceNode(LifecycleNode):
+    """The guidance node as a managed (lifecycle) node, as nav2's servers are:
+
+    - unconfigured: parameters declared (every one settable); nothing subscribed.
+    - configure: the scenario loaded and checked, the planner built, subscriptions and the
+      Trigger service created, a persisted plan restored. A bad parameter fails the transition
+      with an ERROR diagnostic naming it (the node stays unconfigured).
+    - activate: estimates and requests are served, re-plans run, ``thrust_command`` is published.
+    - deactivate: no thrust commands and no re-plans; estimates and requests are dropped
+      (requests with an ERROR diagnostic); the last plan stays latched on its topics.
+    - cleanup / shutdown: the worker stopped, subscriptions and service destroyed.
+
+    ``autostart`` (default true) configures and activates in the constructor, so a plain start
+    behaves as before; a failed configuration then raises DaddyError.
+    """
+
+    def __init__(self, service_node: Node | None = None, namespace: str | None = None,
+                 **overrides):
         """``service_node``: a helper node to host the blocking Trigger service on its own
         executor (``run`` does this); None hosts it here in a reentrant callback group, which
-        needs a multi-threaded executor."""
-        super().__init__(NODE_NAME)
+        needs a multi-threaded executor. ``namespace``: in-process instances side by side (a
+        command line sets it with ``-r __ns:=/sc1``); ``overrides``: parameter defaults."""
+        super().__init__(NODE_NAME, namespace=namespace)
         for p in parameters():
             self.declare_parameter(p.name, overrides.get(p.name, p.default),
                                    ParameterDescriptor(description=p.description))
         self.add_on_set_parameters_callback(self._on_set_parameters)
+        self.service_node = service_node
+        self.planner: GuidancePlanner | None = None
+        self.queue = RequestQueue()
+        self.replans = 0
+        self._active = False
+        self._worker: threading.Thread | None = None
+        self._entities: list = []   # (owner node, subscription or service) made at configure
+        self._replan_on_first_estimate = False
+        self._configure_error = ""
+        self._configured = False
         g = lambda n: self.get_parameter(n).value  # noqa: E731
-        self.planner = GuidancePlanner(config=PlannerConfig(
-            **{f: g(f) for f in PlannerConfig.__dataclass_fields__ if self.has_parameter(f)}))
+        # outputs exist in every state: diagnostics always, the plan latched across deactivation,
+        # thrust commands only while active (a lifecycle publisher)
+        self.pub_schedule = self.create_publisher(JointTrajectory, g("schedule_topic"), LATCHED)
+        self.pub_path = self.create_publisher(PathMsg, g("path_topic"), LATCHED)
+        self.pub_thrust = self.create_lifecycle_publisher(Vector3Stamped, g("thrust_topic"),
+                                                          RELIABLE)
+        self.pub_diag = self.create_publisher(DiagnosticArray, "/diagnostics", RELIABLE)
+        if g("autostart"):
+            if self.trigger_configure() is not TransitionCallbackReturn.SUCCESS:
+                raise DaddyError(self._configure_error or "configure failed")
+            self.trigger_activate()
+
+    @property
+    def lifecycle_state(self) -> str:
+        """The current lifecycle state's label (unconfigured, inactive, active, finalized)."""
+        return self._state_machine.current_state[1]
+
+    # ------------------------------------------------------------------ lifecycle
+    def on_configure(self, state: State) -> TransitionCallbackReturn:
+        g = lambda n: self.get_parameter(n).value  # noqa: E731
+        try:
+            self.planner = GuidancePlanner(config=PlannerConfig(
+                **{f: g(f) for f in PlannerConfig.__dataclass_fields__ if self.has_parameter(f)}))
+        except DaddyError as exc:
+            self._configure_error = str(exc)
+            self._diag(Level.ERROR, f"configure failed: {exc}", {"field": "parameters"}, None)
+            return TransitionCallbackReturn.FAILURE
         cfg = NodeConfig(**{f: g(f) for f in NodeConfig.__dataclass_fields__})
         self.frame_id = cfg.frame_id
         self.plan_file = cfg.plan_file or self._bundled_plan()
-        self.queue = RequestQueue()
-        self.replans = 0
         self.persist_file = cfg.persist_file
-        self._replan_on_first_estimate = False
-
+        self.queue = RequestQueue()
         sub_group = MutuallyExclusiveCallbackGroup()
-        self.create_subscription(Odometry, cfg.state_topic, self._on_state,
-                                 qos_profile_sensor_data, callback_group=sub_group)
-        self.create_subscription(InertiaStamped, cfg.mass_topic, self._on_mass,
-                                 qos_profile_sensor_data, callback_group=sub_group)
-        # requests in their own group: a request flood must not delay the estimates
-        self.create_subscription(Header, cfg.request_topic, self._on_request, RELIABLE,
-                                 callback_group=MutuallyExclusiveCallbackGroup())
-        self.service_node = service_node
-        (service_node or self).create_service(Trigger, self.resolve_service_name("~/replan"),
-                                              self._on_service,
-                                              callback_group=ReentrantCallbackGroup())
-        self.pub_schedule = self.create_publisher(JointTrajectory, cfg.schedule_topic, LATCHED)
-        self.pub_path = self.create_publisher(PathMsg, cfg.path_topic, LATCHED)
-        self.pub_thrust = self.create_publisher(Vector3Stamped, cfg.thrust_topic, RELIABLE)
-        self.pub_diag = self.create_publisher(DiagnosticArray, "/diagnostics", RELIABLE)
+        owner = self.service_node or self
+        self._entities = [
+            (self, self.create_subscription(Odometry, cfg.state_topic, self._on_state,
+                                            qos_profile_sensor_data, callback_group=sub_group)),
+            (self, self.create_subscription(InertiaStamped, cfg.mass_topic, self._on_mass,
+                                            qos_profile_sensor_data, callback_group=sub_group)),
+            # requests in their own group: a request flood must not delay the estimates
+            (self, self.create_subscription(Header, cfg.request_topic, self._on_request,
+                                            RELIABLE,
+                                            callback_group=MutuallyExclusiveCallbackGroup())),
+            (owner, owner.create_service(Trigger, self.resolve_service_name("~/replan"),
+                                         self._on_service,
+                                         callback_group=ReentrantCallbackGroup()))]
         self._worker = threading.Thread(target=self._work, name="daddy_replan", daemon=True)
         self._worker.start()
         if self.persist_file and Path(self.persist_file).exists():
             self._restore()
-        self.get_logger().info(f"daddy_guidance ready: scenario {self.planner.case.name}, "
+        self._configured = True
+        self.get_logger().info(f"daddy_guidance configured: scenario {self.planner.case.name}, "
                                f"method {self.planner.method}, frame {self.frame_id}")
+        return TransitionCallbackReturn.SUCCESS
+
+    def on_activate(self, state: State) -> TransitionCallbackReturn:
+        self._active = True
+        self.get_logger().info("daddy_guidance ready: active")
+        return super().on_activate(state)
+
+    def on_deactivate(self, state: State) -> TransitionCallbackReturn:
+        self._active = False
+        self.get_logger().info("daddy_guidance inactive: no thrust commands, no re-plans")
+        return super().on_deactivate(state)
+
+    def on_cleanup(self, state: State) -> TransitionCallbackReturn:
+        self._teardown()
+        return TransitionCallbackReturn.SUCCESS
+
+    def on_shutdown(self, state: State) -> TransitionCallbackReturn:
+        self._active = False
+        self._teardown()
+        return TransitionCallbackReturn.SUCCESS
+
+    def _teardown(self) -> None:
+        """Stop the worker and destroy what configure made. The planner object stays (a solve
+        still finishing after the 5 s join may use it); the next configure builds a new one."""
+        self.stop()
+        for owner, entity in self._entities:
+            if isinstance(entity, Subscription):
+                owner.destroy_subscription(entity)
+            else:
+                owner.destroy_service(entity)
+        self._entities = []
+        self._configured = False
 
     # ------------------------------------------------------------------ parameters
     def _bundled_plan(self) -> str:
@@ -102,14 +184,15 @@ class GuidanceNode(Node):
 
     def _on_set_parameters(self, params):
         """Runtime updates: the ``runtime`` parameters of ``config`` (time_budget_s and
-        staleness_s, positive finite floats); every other declared parameter is read-only after
-        start-up. A rejected update changes nothing."""
+        staleness_s, positive finite floats) in every state; every other declared parameter
+        only while unconfigured (configure reads them). A rejected update changes nothing."""
         why = next((r for r in map(self._parameter_problem, params) if r), None)
         if why:
             self._diag(Level.WARN, f"parameter update rejected: {why}", {"field": "parameters"},
                        None)
             return SetParametersResult(successful=False, reason=why)
-        self.planner.update(**{p.name: p.value for p in params if p.name in RUNTIME})
+        if self._configured:
+            self.planner.update(**{p.name: p.value for p in params if p.name in RUNTIME})
         return SetParametersResult(successful=True)
 
     def _parameter_problem(self, p) -> str:
@@ -122,9 +205,9 @@ class GuidanceNode(Node):
                 load_case(p.value)
             except DaddyError:
                 return (f"scenario {p.value!r} is unknown (known: {', '.join(list_cases())}); "
-                        "scenario is also read-only after start-up")
-        if p.name in NAMES and self.has_parameter(p.name):
-            return f"{p.name} is read-only after start-up"
+                        "scenario is also read-only once configured")
+        if p.name in NAMES and self.has_parameter(p.name) and self._configured:
+            return f"{p.name} is read-only once configured (clean the node up to change it)"
         return ""
 
     # ------------------------------------------------------------------ inputs
@@ -135,6 +218,8 @@ class GuidanceNode(Node):
                    stamp if math.isfinite(stamp) and stamp > 0 else None, log_every_s=1.0)
 
     def _on_state(self, msg: Odometry):
+        if not self._active:   # inactive: estimates are not served (no thrust commands)
+            return
         stamp, frame = cv.stamp_to_s(msg.header.stamp), msg.header.frame_id
         if frame != self.frame_id:
             self._reject("state_estimate", f"state_estimate.header.frame_id {frame!r} is not "
@@ -153,6 +238,8 @@ class GuidanceNode(Node):
         self._maybe_replan_after_restart()
 
     def _on_mass(self, msg: InertiaStamped):
+        if not self._active:
+            return
         mass, stamp = float(msg.inertia.m), cv.stamp_to_s(msg.header.stamp)
         try:
             self.planner.checks.check_mass(mass, stamp)
@@ -213,9 +300,18 @@ class GuidanceNode(Node):
         return plan
 
     def _on_request(self, msg: Header):
+        if not self._active:
+            self._diag(Level.ERROR, f"request rejected: the node is {self.lifecycle_state}, "
+                       "not active", {"request_id": msg.frame_id or "topic"},
+                       cv.stamp_to_s(msg.stamp) or None, log_every_s=1.0)
+            return
         self.queue.enqueue(msg.frame_id or "topic", cv.stamp_to_s(msg.stamp))
 
     def _on_service(self, request, response):
+        if not self._active:
+            response.success = False
+            response.message = f"ERROR: the node is {self.lifecycle_state}, not active"
+            return response
         target = self.queue.enqueue(f"service-{time.monotonic_ns()}", None)
         # the next solve to start absorbs this request (coalescing); wait for it to finish
         done, (level, reason, stored) = self.queue.wait_done(
@@ -320,8 +416,11 @@ class GuidanceNode(Node):
         return self.queue.coalesced
 
     def stop(self):
+        """Stop the solver worker (the solve in progress, if any, finishes first)."""
         self.queue.stop()
-        self._worker.join(timeout=5.0)
+        if self._worker is not None:
+            self._worker.join(timeout=5.0)
+            self._worker = None
 
 
 def run(node_factory, args=None) -> int:

@@ -204,3 +204,87 @@ def test_triggers_during_a_solve_are_coalesced(graph):
     # depth-10 history may also drop the oldest of a fast burst, which is coalescing too)
     assert solved + merged <= 20
     assert merged >= 1 and 1 <= solved < 20
+
+
+def test_lifecycle_transitions_gate_thrust_and_requests(graph):
+    """A managed node (autostart false) driven through the standard lifecycle services by a
+    client: no thrust command while unconfigured or inactive, a request while inactive is
+    refused with an ERROR naming the state, a bad parameter fails configure (the node stays
+    unconfigured, the parameter can then be fixed), and deactivate / activate stops and resumes
+    thrust with the plan still latched."""
+    from lifecycle_msgs.msg import Transition
+    from lifecycle_msgs.srv import ChangeState, GetState
+    from rcl_interfaces.srv import SetParameters
+    from rclpy.parameter import Parameter
+
+    from daddy_ros.spin import SpinThread
+    ns = "/lc"
+    node = GuidanceNode(namespace=ns, scenario="earth_mars", frame_id=FRAME,
+                        time_budget_s=60.0, autostart=False, thrust_margin=2.0)
+    spin = SpinThread(node)
+    c = GuidanceClient(FRAME, name="daddy_lifecycle_client", namespace=ns)
+    pos, vel, mass = truth_at_start()
+
+    def state():
+        resp, _ = c.call(c.get_state, GetState.Request(), 15.0)
+        return resp.current_state.label if resp else "no answer"
+
+    def change(tid):
+        resp, _ = c.call(c.change_state, ChangeState.Request(transition=Transition(id=tid)), 30)
+        return resp is not None and resp.success
+
+    def thrust_after(t):
+        return [m for _, m in c.thrust if cv.stamp_to_s(m.header.stamp) >= t - 1e-6]
+
+    def fly_until_thrust(t):
+        """Estimates every 0.2 s from stamp t on (best-effort topic, late discovery) until a
+        thrust command answers one; the last stamp sent."""
+        end = time.monotonic() + 15
+        while time.monotonic() < end and not thrust_after(t):
+            c.publish_estimate(pos, vel, mass, t)
+            c.wait_for(lambda: thrust_after(t), 0.2)
+        return bool(thrust_after(t))
+
+    try:
+        assert state() == "unconfigured"
+        assert not change(Transition.TRANSITION_CONFIGURE), "thrust_margin 2.0 must fail"
+        assert state() == "unconfigured"
+        assert c.wait_for(lambda: [d for _, d in c.diags
+                                   if "configure failed" in d.status[0].message
+                                   and "thrust_margin" in d.status[0].message], 10)
+        resp, _ = c.call(c.set_params, SetParameters.Request(parameters=[
+            Parameter("thrust_margin", value=0.05).to_parameter_msg()]), 10.0)
+        assert resp.results[0].successful, "parameters are editable while unconfigured"
+        assert change(Transition.TRANSITION_CONFIGURE) and state() == "inactive"
+        end = time.monotonic() + 15
+        while time.monotonic() < end and not c.pub_state.get_subscription_count():
+            time.sleep(0.05)
+        for k in range(5):   # inactive: estimates dropped, no thrust
+            c.publish_estimate(pos, vel, mass, T0 + 0.1 * k)
+            time.sleep(0.05)
+        c.request("while-inactive", T0)
+        assert c.wait_for(lambda: [d for _, d in c.diags if "while-inactive" in str(
+            d.status[0].values) and "not active" in d.status[0].message], 10)
+        assert change(Transition.TRANSITION_ACTIVATE) and state() == "active"
+        assert fly_until_thrust(T0 + 1.0), "no thrust command while active"
+        assert c.wait_for(lambda: c.schedules, 15)
+        assert change(Transition.TRANSITION_DEACTIVATE) and state() == "inactive"
+        for k in range(5):
+            c.publish_estimate(pos, vel, mass, T0 + 2.0 + k)
+            time.sleep(0.05)
+        late = GuidanceClient(FRAME, name="daddy_lifecycle_late", namespace=ns)
+        try:   # the plan stays latched for a subscriber joining while inactive
+            assert late.wait_for(lambda: late.schedules, 15)
+        finally:
+            late.close()
+        assert change(Transition.TRANSITION_ACTIVATE)
+        assert fly_until_thrust(T0 + 10.0)
+        stamps = [cv.stamp_to_s(m.header.stamp) for _, m in c.thrust]
+        assert not [s for s in stamps if s < T0 + 1.0 - 1e-6 or T0 + 2.0 - 1e-6 <= s
+                    <= T0 + 6.0 + 1e-6], "thrust published while unconfigured or inactive"
+    finally:
+        c.close()
+        spin.shutdown()
+        if node.lifecycle_state != "finalized":
+            node.trigger_shutdown()
+        node.destroy_node()
