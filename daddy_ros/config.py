@@ -73,6 +73,9 @@ class NodeConfig:
     autostart: bool = _param(True, "configure and activate at start-up (a plain `ros2 run`); "
                                    "false: an external lifecycle manager drives the "
                                    "transitions through the standard lifecycle services")
+    diagnostics_period_s: float = _param(1.0, "period of the node's health status on "
+                                              "/diagnostics [s] (lifecycle state, plan age, "
+                                              "next stage, last solve); 0: none")
     frame_id: str = _param("earth_moon_rotating", "frame of state estimates and thrust")
     plan_file: str = _param("", "nominal plan (solution JSON) adopted at the first estimate; "
                                 "empty: the bundled nominal of the scenario if any, else a cold "

@@ -17,7 +17,6 @@ from .checks import InputRejected
 from .plan import Level, Plan
 
 JOINT_NAMES = ["thrust_x", "thrust_y", "thrust_z"]
-STATUS_NAME = "daddy_guidance: replan"
 LEVELS = {Level.OK: DiagnosticStatus.OK, Level.WARN: DiagnosticStatus.WARN,
           Level.ERROR: DiagnosticStatus.ERROR}
 
@@ -158,10 +157,13 @@ def plan_to_path(plan: Plan, frame_id: str) -> Path:
     return msg
 
 
-def diagnostics(level: Level, message: str, values: dict, stamp_s: float,
-                hardware_id: str = "daddy_guidance") -> DiagnosticArray:
-    st = DiagnosticStatus(level=LEVELS[level], name=STATUS_NAME, message=message[:500],
-                          hardware_id=hardware_id)
+def diagnostics(level: Level, message: str, values: dict, stamp_s: float, node_fqn: str,
+                kind: str = "replan") -> DiagnosticArray:
+    """One DiagnosticStatus named "<node's fully qualified name>: <kind>" (kind ``replan``
+    for events, ``health`` for the periodic status), hardware_id the node's name: namespaced
+    instances are told apart."""
+    st = DiagnosticStatus(level=LEVELS[level], name=f"{node_fqn}: {kind}", message=message[:500],
+                          hardware_id=node_fqn)
     st.values = [KeyValue(key=str(k), value=str(v)) for k, v in values.items()]
     arr = DiagnosticArray()
     arr.header = Header(stamp=s_to_stamp(stamp_s))

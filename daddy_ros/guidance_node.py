@@ -69,18 +69,24 @@ class GuidanceNode(LifecycleNode):
     behaves as before; a failed configuration then raises DaddyError.
     """
 
-    def __init__(self, service_node: Node | None = None, namespace: str | None = None,
+    def __init__(self, separate_service_node: bool = False, namespace: str | None = None,
                  **overrides):
-        """``service_node``: a helper node to host the blocking Trigger service on its own
-        executor (``run`` does this); None hosts it here in a reentrant callback group, which
-        needs a multi-threaded executor. ``namespace``: in-process instances side by side (a
-        command line sets it with ``-r __ns:=/sc1``); ``overrides``: parameter defaults."""
+        """``separate_service_node``: host the blocking Trigger service on a helper node
+        ``daddy_guidance_service`` in this node's namespace, to be spun on its own executor
+        (``run`` does this; ``self.service_node``); False hosts it here in a reentrant callback
+        group, which needs a multi-threaded executor. ``namespace``: in-process instances side
+        by side (a command line sets it with ``-r __ns:=/sc1``); ``overrides``: parameter
+        defaults."""
         super().__init__(NODE_NAME, namespace=namespace)
         for p in parameters():
             self.declare_parameter(p.name, overrides.get(p.name, p.default),
                                    ParameterDescriptor(description=p.description))
         self.add_on_set_parameters_callback(self._on_set_parameters)
-        self.service_node = service_node
+        self.service_node = Node(f"{NODE_NAME}_service", namespace=self.get_namespace(),
+                                 use_global_arguments=False, start_parameter_services=False,
+                                 enable_rosout=False) if separate_service_node else None
+        self.fqn = self.get_fully_qualified_name()
+        self._last_solve: tuple = ()    # the last solve: (level, reason, solve s, unix time)
         self.planner: GuidancePlanner | None = None
         self.queue = RequestQueue()
         self.replans = 0
@@ -98,6 +104,11 @@ class GuidanceNode(LifecycleNode):
         self.pub_thrust = self.create_lifecycle_publisher(Vector3Stamped, g("thrust_topic"),
                                                           RELIABLE)
         self.pub_diag = self.create_publisher(DiagnosticArray, "/diagnostics", RELIABLE)
+        period = g("diagnostics_period_s")
+        if not (isinstance(period, float) and math.isfinite(period) and period >= 0.0):
+            raise DaddyError(f"diagnostics_period_s must be a finite float >= 0, got {period!r}")
+        if period > 0.0:   # live health: an aggregator never sees the node stale between events
+            self.create_timer(period, self._health)
         if g("autostart"):
             if self.trigger_configure() is not TransitionCallbackReturn.SUCCESS:
                 raise DaddyError(self._configure_error or "configure failed")
@@ -367,6 +378,44 @@ class GuidanceNode(LifecycleNode):
                 out.level, out.reason = Level.WARN, f"{out.reason}; {why}"
         self._finish(request_id, out, out.level, out.reason, stamp, started)
 
+    def _health(self) -> None:
+        """The periodic status: lifecycle state, the plan's age and the time to its next stage
+        (mission time of the newest estimate), the last solve. Its message never repeats the
+        last solve's reason (that is in the values): a periodic message must not read as a
+        new event."""
+        values = {"lifecycle_state": self.lifecycle_state}
+        level, message = Level.OK, self.lifecycle_state
+        plan = self.planner.plan if self._configured else None
+        newest = self.queue.state_for(None) if self._configured else None
+        if plan is not None:
+            values.update(plan_epoch_s=f"{plan.epoch_s:.3f}",
+                          plan_max_violation=f"{plan.max_violation:.3e}")
+            if newest is not None:
+                now = newest.stamp_s
+                ends = plan.epoch_s + plan.stage_start_s + plan.stage_dt_s
+                nxt = ends[ends > now]
+                values["plan_age_s"] = f"{now - plan.epoch_s:.3f}"
+                values["time_to_next_stage_s"] = f"{nxt[0] - now:.3f}" if nxt.size else "none"
+        if self._last_solve:
+            lvl, reason, solve_s, wall = self._last_solve
+            values.update(last_solve_level=str(lvl), last_solve_reason=reason[:200],
+                          last_solve_time_s=f"{solve_s:.4f}" if solve_s is not None else "",
+                          last_solve_age_s=f"{time.time() - wall:.1f}")
+        values.update(solves=str(self.queue.finished), coalesced=str(self.queue.coalesced))
+        if not self._configured:
+            level = Level.WARN
+        elif self._active and plan is None:
+            level, message = Level.WARN, "active: no plan yet"
+        elif self._active and self._last_solve and self._last_solve[0] is Level.ERROR:
+            level, message = Level.WARN, "active: the last re-plan failed; last valid plan in force"
+        elif self._active:
+            message = "active: plan in force"
+        else:
+            message = "inactive: no thrust commands, no re-plans"
+        self.pub_diag.publish(cv.diagnostics(level, message, values,
+                                             self.get_clock().now().nanoseconds * 1e-9,
+                                             self.fqn, kind="health"))
+
     def _finish(self, request_id, out, level, reason, stamp, extra=None):
         plan = self.planner.plan
         if plan is not None:
@@ -383,6 +432,8 @@ class GuidanceNode(LifecycleNode):
                            "final_mass_kg": f"{plan.states_si[-1, 6]:.4f}",
                            "thrust_bound_n": f"{plan.thrust_bound_n:.6g}"})
         self._diag(level, reason, values, stamp)
+        self._last_solve = (level, reason, out.solve_time_s if out is not None else None,
+                            time.time())
         self.queue.record(level, reason, bool(out is not None and out.ok))
 
     def adopt_plan(self, plan) -> None:
@@ -403,7 +454,7 @@ class GuidanceNode(LifecycleNode):
         log_every_s seconds when given, so a flood of bad inputs does not flood the log)."""
         if stamp is None:   # no message time to refer to: the node's clock
             stamp = self.get_clock().now().nanoseconds * 1e-9
-        self.pub_diag.publish(cv.diagnostics(level, message, values, stamp))
+        self.pub_diag.publish(cv.diagnostics(level, message, values, stamp, self.fqn))
         # rclpy fixes a call site's filters at its first call: one call site per filter
         if level is not Level.OK and log_every_s:
             self.get_logger().warning(f"{level}: {message}", throttle_duration_sec=log_every_s)
@@ -466,18 +517,8 @@ def run(node_factory, args=None) -> int:
     return 0
 
 
-def _guidance_with_service_node() -> GuidanceNode:
-    helper = Node("daddy_guidance_service", use_global_arguments=False,
-                  start_parameter_services=False, enable_rosout=False)
-    try:
-        return GuidanceNode(service_node=helper)
-    except Exception:
-        helper.destroy_node()
-        raise
-
-
 def main(args=None) -> int:
-    return run(_guidance_with_service_node, args)
+    return run(lambda: GuidanceNode(separate_service_node=True), args)
 
 
 if __name__ == "__main__":

@@ -58,8 +58,12 @@ def test_installed_node_starts_and_stops(install):
     env = dict(os.environ, PYTHONPATH=f"{site}{os.pathsep}{os.environ.get('PYTHONPATH', '')}",
                ROS_AUTOMATIC_DISCOVERY_RANGE="LOCALHOST")
     params = install / "daddy_ros/share/daddy_ros/config/guidance.yaml"
+    # a namespace of its own: another daddy_guidance in the domain (or one this process
+    # destroyed, still in the discovery cache) must not be mistaken for it
+    ns = f"/colcon_probe_{os.getpid()}"
     proc = subprocess.Popen([str(exe), "--ros-args", "--params-file", str(params),
-                             "-p", "scenario:=earth_mars", "-p", "frame_id:=sun_ecliptic"],
+                             "-p", "scenario:=earth_mars", "-p", "frame_id:=sun_ecliptic",
+                             "-r", f"__ns:={ns}"],
                             env=env, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
     try:
         rclpy.init()
@@ -67,8 +71,9 @@ def test_installed_node_starts_and_stops(install):
         found = False
         end = time.monotonic() + 30
         while time.monotonic() < end and proc.poll() is None:
-            if "daddy_guidance" in node.get_node_names():
-                found = True
+            names = set(node.get_node_names_and_namespaces())
+            if {("daddy_guidance", ns), ("daddy_guidance_service", ns)} <= names:
+                found = True   # the service helper joins the node's namespace too
                 break
             rclpy.spin_once(node, timeout_sec=0.1)
         node.destroy_node()

@@ -72,7 +72,7 @@ def test_nominal_then_replan_publishes_valid_schedule(graph):
     assert st, "no diagnostics for req-1"
     vals = {kv.key: kv.value for kv in st.values}
     assert st.level == DiagnosticStatus.OK, st.message
-    assert st.name.startswith("daddy_guidance")
+    assert st.name == "/daddy_guidance: replan" and st.hardware_id == "/daddy_guidance"
     for key in ("request_id", "solve_time_s", "max_violation", "final_mass_kg", "method",
                 "warm_start", "thrust_bound_n"):
         assert key in vals
@@ -288,3 +288,56 @@ def test_lifecycle_transitions_gate_thrust_and_requests(graph):
         if node.lifecycle_state != "finalized":
             node.trigger_shutdown()
         node.destroy_node()
+
+
+def test_two_namespaced_instances_publish_distinct_live_health(graph):
+    """Two instances side by side (/sc1 active, /sc2 left unconfigured): each publishes its
+    periodic health under its own fully qualified name and hardware_id, with its lifecycle
+    state, and /sc1's turns OK with the plan's age and time to the next stage once it has a
+    plan. (Period 0.25 s; at least 4 statuses each within 5 s: a 3x margin on a loaded
+    machine.)"""
+    from daddy_ros.spin import SpinThread
+    nodes = [GuidanceNode(namespace="/sc1", scenario="earth_mars", frame_id=FRAME,
+                          diagnostics_period_s=0.25),
+             GuidanceNode(namespace="/sc2", scenario="earth_mars", frame_id=FRAME,
+                          diagnostics_period_s=0.25, autostart=False)]
+    spins = [SpinThread(n) for n in nodes]
+    c = GuidanceClient(FRAME, name="daddy_health_client", namespace="/sc1")
+    try:
+        def health(fqn):
+            out = []
+            for _, m in c.diags:
+                for st in m.status:
+                    if st.name == f"{fqn}: health":
+                        out.append(st)
+            return out
+
+        assert c.wait_for(lambda: len(health("/sc1/daddy_guidance")) >= 4
+                          and len(health("/sc2/daddy_guidance")) >= 4, 5.0)
+        h1, h2 = health("/sc1/daddy_guidance")[-1], health("/sc2/daddy_guidance")[-1]
+        assert h1.hardware_id == "/sc1/daddy_guidance" and h2.hardware_id == "/sc2/daddy_guidance"
+        v1 = {kv.key: kv.value for kv in h1.values}
+        v2 = {kv.key: kv.value for kv in h2.values}
+        assert v1["lifecycle_state"] == "active" and v2["lifecycle_state"] == "unconfigured"
+        assert h2.level == DiagnosticStatus.WARN
+        pos, vel, mass = truth_at_start()
+        end = time.monotonic() + 15
+        while time.monotonic() < end and not c.schedules:
+            c.publish_estimate(pos, vel, mass, T0 + 3600.0)   # an hour into the plan
+            c.wait_for(lambda: c.schedules, 0.3)
+        n0 = len(health("/sc1/daddy_guidance"))
+        assert c.wait_for(lambda: [s for s in health("/sc1/daddy_guidance")[n0:]
+                                   if s.level == DiagnosticStatus.OK], 5.0)
+        v1 = {kv.key: kv.value for kv in health("/sc1/daddy_guidance")[-1].values}
+        plan = nodes[0].planner.plan
+        assert float(v1["plan_age_s"]) == pytest.approx(T0 + 3600.0 - plan.epoch_s, abs=1e-3)
+        next_end = plan.epoch_s + plan.stage_start_s[0] + plan.stage_dt_s[0]
+        assert float(v1["time_to_next_stage_s"]) == pytest.approx(next_end - (T0 + 3600.0),
+                                                                  abs=1e-3)
+    finally:
+        c.close()
+        for s in spins:
+            s.shutdown()
+        for n in nodes:
+            n.stop()
+            n.destroy_node()
