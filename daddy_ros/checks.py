@@ -11,12 +11,19 @@ from daddy_core.catalogue import Case
 from daddy_core.dynamics.units import EARTH_RADIUS_KM, MOON_RADIUS_KM
 from daddy_core.errors import DaddyError
 
+from .plan import Code
+
 # an estimate stamped up to this much after the request time is still usable [s]
 FUTURE_TOLERANCE_S = 1.0
 
 
 class InputRejected(DaddyError):
-    """A state estimate, mass or request that is not used; the message names the field."""
+    """A state estimate, mass or request that is not used; the message names the field, the
+    code says which kind of rejection it is (plan.Code)."""
+
+    def __init__(self, message: str, code: Code = Code.INPUT_REJECTED):
+        super().__init__(message)
+        self.code = code
 
 
 class EstimateChecks:
@@ -63,10 +70,10 @@ class EstimateChecks:
         if now_s is not None:
             if stamp_s > now_s + FUTURE_TOLERANCE_S:
                 raise InputRejected(f"state_estimate.header.stamp is {stamp_s - now_s:.3g} s in "
-                                    "the future of the request")
+                                    "the future of the request", Code.FUTURE)
             if now_s - stamp_s > self.staleness_s:
                 raise InputRejected(f"state_estimate.header.stamp is stale ({now_s - stamp_s:.3g}"
-                                    f" s old, bound staleness_s = {self.staleness_s:.3g} s)")
+                                    f" s old, bound staleness_s = {self.staleness_s:.3g} s)", Code.STALE)
         return self.units.states_normalised(np.concatenate([np.asarray(pos_m, float),
                                                             np.asarray(vel_m_s, float),
                                                             [mass_kg]]))

@@ -38,7 +38,7 @@ from daddy_core.errors import DaddyError
 from . import conversions as cv
 from .checks import InputRejected
 from .config import NodeConfig, PlannerConfig, bundled_plan, parameters
-from .plan import Level
+from .plan import Code, Level
 from .planner import GuidancePlanner
 from .request_queue import RequestQueue
 from .spin import SpinThread, spin_guarded
@@ -127,7 +127,8 @@ class GuidanceNode(LifecycleNode):
                 **{f: g(f) for f in PlannerConfig.__dataclass_fields__ if self.has_parameter(f)}))
         except DaddyError as exc:
             self._configure_error = str(exc)
-            self._diag(Level.ERROR, f"configure failed: {exc}", {"field": "parameters"}, None)
+            self._diag(Level.ERROR, Code.CONFIGURE_FAILED, f"configure failed: {exc}",
+                       {"field": "parameters"}, None)
             return TransitionCallbackReturn.FAILURE
         cfg = NodeConfig(**{f: g(f) for f in NodeConfig.__dataclass_fields__})
         self.frame_id = cfg.frame_id
@@ -199,7 +200,8 @@ class GuidanceNode(LifecycleNode):
         only while unconfigured (configure reads them). A rejected update changes nothing."""
         why = next((r for r in map(self._parameter_problem, params) if r), None)
         if why:
-            self._diag(Level.WARN, f"parameter update rejected: {why}", {"field": "parameters"},
+            self._diag(Level.WARN, Code.PARAMETER_REJECTED, f"parameter update rejected: {why}",
+                       {"field": "parameters"},
                        None)
             return SetParametersResult(successful=False, reason=why)
         if self._configured:
@@ -222,9 +224,10 @@ class GuidanceNode(LifecycleNode):
         return ""
 
     # ------------------------------------------------------------------ inputs
-    def _reject(self, topic: str, reason: str, stamp: float) -> None:
+    def _reject(self, topic: str, reason: str, stamp: float,
+                code: Code = Code.INPUT_REJECTED) -> None:
         """An input that is not used: ERROR diagnostic naming the field; nothing else changes."""
-        self._diag(Level.ERROR, f"input rejected: {reason}",
+        self._diag(Level.ERROR, code, f"input rejected: {reason}",
                    {"topic": topic, "stamp_s": f"{stamp:.9f}"},
                    stamp if math.isfinite(stamp) and stamp > 0 else None, log_every_s=1.0)
 
@@ -240,7 +243,7 @@ class GuidanceNode(LifecycleNode):
             est = cv.odometry_to_state(msg)
             self.planner.checks.check_estimate(est.pos_m, est.vel_m_s, stamp)
         except InputRejected as exc:
-            self._reject("state_estimate", str(exc), stamp)
+            self._reject("state_estimate", str(exc), stamp, exc.code)
             return
         self.queue.add_state(est.pos_m, est.vel_m_s, stamp, est.pos_sigma_m, est.vel_sigma_m_s)
         plan = self.planner.plan or self._adopt_nominal()
@@ -255,7 +258,7 @@ class GuidanceNode(LifecycleNode):
         try:
             self.planner.checks.check_mass(mass, stamp)
         except InputRejected as exc:
-            self._reject("mass_estimate", str(exc), stamp)
+            self._reject("mass_estimate", str(exc), stamp, exc.code)
             return
         self.queue.add_mass(stamp, mass)
         if self.planner.plan is None:
@@ -272,12 +275,13 @@ class GuidanceNode(LifecycleNode):
         try:
             plan = self.planner.restore_plan(self.persist_file)
         except DaddyError as exc:
-            self._diag(Level.ERROR, f"persist_file not restored: {exc}", {"field": "persist_file"},
+            self._diag(Level.ERROR, Code.PLAN_FILE_ERROR, f"persist_file not restored: {exc}",
+                       {"field": "persist_file"},
                        None)
             return
         self._publish_plan(plan, None)
         self._replan_on_first_estimate = True
-        self._diag(Level.WARN,
+        self._diag(Level.WARN, Code.RESTORED,
                    f"restored the persisted plan (epoch {plan.epoch_s:.3f} s); re-planning "
                    "at the first estimate", {"request_id": "restored"}, plan.epoch_s)
 
@@ -301,18 +305,20 @@ class GuidanceNode(LifecycleNode):
         try:
             plan = self.planner.load_plan(plan_file, stamp)
         except Exception as exc:
-            self._diag(Level.ERROR, f"cannot load plan_file: {exc}", {}, stamp)
+            self._diag(Level.ERROR, Code.PLAN_FILE_ERROR, f"cannot load plan_file: {exc}", {},
+                       stamp)
             self.plan_file = ""
             return None
         self._publish_plan(plan, stamp)
         self._persist()
-        self._diag(Level.OK, f"adopted nominal plan {Path(plan_file).name}",
+        self._diag(Level.OK, Code.PLAN_ADOPTED, f"adopted nominal plan {Path(plan_file).name}",
                    {"request_id": "nominal"}, stamp)
         return plan
 
     def _on_request(self, msg: Header):
         if not self._active:
-            self._diag(Level.ERROR, f"request rejected: the node is {self.lifecycle_state}, "
+            self._diag(Level.ERROR, Code.NOT_ACTIVE, f"request rejected: the node is "
+                       f"{self.lifecycle_state}, "
                        "not active", {"request_id": msg.frame_id or "topic"},
                        cv.stamp_to_s(msg.stamp) or None, log_every_s=1.0)
             return
@@ -340,7 +346,8 @@ class GuidanceNode(LifecycleNode):
             try:
                 self._replan_once(req.request_id, req.stamp_s)
             except Exception as exc:  # never let the worker die
-                self._finish(req.request_id, None, Level.ERROR, f"internal error: {exc!r}", None)
+                self._finish(req.request_id, None, Level.ERROR, Code.INTERNAL_ERROR,
+                             f"internal error: {exc!r}", None)
             finally:
                 self.queue.done()
 
@@ -349,15 +356,14 @@ class GuidanceNode(LifecycleNode):
         try:
             state = self.queue.state_for(request_stamp)
         except InputRejected as exc:
-            self._finish(request_id, None, Level.ERROR, f"input rejected: {exc}", request_stamp,
-                         started)
+            self._finish(request_id, None, Level.ERROR, exc.code, f"input rejected: {exc}",
+                         request_stamp, started)
             return
         now = request_stamp if request_stamp is not None else (state.stamp_s if state else None)
         mass = None if state is None else self.queue.mass_for(state.stamp_s)
         if state is None or mass is None:
-            self._finish(request_id, None, Level.ERROR,
-                         "no valid state_estimate and mass_estimate yet",
-                         now, started)
+            self._finish(request_id, None, Level.ERROR, Code.NO_ESTIMATE,
+                         "no valid state_estimate and mass_estimate yet", now, started)
             return
         pos, vel, stamp = state.pos_m, state.vel_m_s, state.stamp_s
         started["state_stamp_s"] = f"{stamp:.9f}"
@@ -369,14 +375,15 @@ class GuidanceNode(LifecycleNode):
             out = self.planner.replan(pos, vel, mass, stamp, request_id,
                                       now_s=request_stamp)
         except InputRejected as exc:
-            self._finish(request_id, None, Level.ERROR, f"input rejected: {exc}", now, started)
+            self._finish(request_id, None, Level.ERROR, exc.code, f"input rejected: {exc}", now,
+                         started)
             return
         self.replans += 1
         if out.ok:
             why = self._persist()
             if why:
                 out.level, out.reason = Level.WARN, f"{out.reason}; {why}"
-        self._finish(request_id, out, out.level, out.reason, stamp, started)
+        self._finish(request_id, out, out.level, out.code, out.reason, stamp, started)
 
     def _health(self) -> None:
         """The periodic status: lifecycle state, the plan's age and the time to its next stage
@@ -416,7 +423,8 @@ class GuidanceNode(LifecycleNode):
                                              self.get_clock().now().nanoseconds * 1e-9,
                                              self.fqn, kind="health"))
 
-    def _finish(self, request_id, out, level, reason, stamp, extra=None):
+    def _finish(self, request_id, out, level: Level, code: Code, reason: str, stamp,
+                extra=None):
         plan = self.planner.plan
         if plan is not None:
             self._publish_plan(plan, stamp if out is not None and out.ok else None)
@@ -431,7 +439,7 @@ class GuidanceNode(LifecycleNode):
             values.update({"max_violation": f"{plan.max_violation:.3e}",
                            "final_mass_kg": f"{plan.states_si[-1, 6]:.4f}",
                            "thrust_bound_n": f"{plan.thrust_bound_n:.6g}"})
-        self._diag(level, reason, values, stamp)
+        self._diag(level, code, reason, values, stamp)
         self._last_solve = (level, reason, out.solve_time_s if out is not None else None,
                             time.time())
         self.queue.record(level, reason, bool(out is not None and out.ok))
@@ -441,7 +449,8 @@ class GuidanceNode(LifecycleNode):
         self.planner.set_plan(plan)
         self._publish_plan(plan, plan.epoch_s)
         self._persist()
-        self._diag(Level.OK, "adopted a plan", {"request_id": plan.request_id or "adopted"},
+        self._diag(Level.OK, Code.PLAN_ADOPTED, "adopted a plan",
+                   {"request_id": plan.request_id or "adopted"},
                    plan.epoch_s)
 
     # ------------------------------------------------------------------ outputs
@@ -449,12 +458,15 @@ class GuidanceNode(LifecycleNode):
         self.pub_schedule.publish(cv.plan_to_joint_trajectory(plan, self.frame_id, stamp))
         self.pub_path.publish(cv.plan_to_path(plan, self.frame_id))
 
-    def _diag(self, level, message, values, stamp, log_every_s=None):
-        """Publish one DiagnosticStatus; non-OK ones are also logged (at most once per
-        log_every_s seconds when given, so a flood of bad inputs does not flood the log)."""
+    def _diag(self, level: Level, code: Code, message: str, values: dict, stamp,
+              log_every_s=None):
+        """Publish one DiagnosticStatus with its result ``code`` among its values; non-OK ones
+        are also logged (at most once per log_every_s seconds when given, so a flood of bad
+        inputs does not flood the log)."""
         if stamp is None:   # no message time to refer to: the node's clock
             stamp = self.get_clock().now().nanoseconds * 1e-9
-        self.pub_diag.publish(cv.diagnostics(level, message, values, stamp, self.fqn))
+        self.pub_diag.publish(cv.diagnostics(level, message, {"code": code, **values}, stamp,
+                                             self.fqn))
         # rclpy fixes a call site's filters at its first call: one call site per filter
         if level is not Level.OK and log_every_s:
             self.get_logger().warning(f"{level}: {message}", throttle_duration_sec=log_every_s)
@@ -500,7 +512,8 @@ def run(node_factory, args=None) -> int:
         side_executor = SpinThread(side)
     def report(exc):
         if hasattr(node, "_diag"):
-            node._diag(Level.ERROR, f"internal error in a callback: {exc!r}", {}, None)
+            node._diag(Level.ERROR, Code.INTERNAL_ERROR, f"internal error in a callback: {exc!r}",
+                       {}, None)
 
     try:
         spin_guarded(executor, stop, report)

@@ -34,6 +34,34 @@ class Level(str, Enum):
     __format__ = str.__format__
 
 
+class Code(str, Enum):
+    """The stable result code of a diagnostic event (the ``code`` value on /diagnostics; the
+    message is free text for people, the code is for programs). Values never change meaning;
+    new ones may be added."""
+
+    OK = "OK"                               # re-optimised, converged, within budget
+    NOT_CONVERGED = "NOT_CONVERGED"         # stored the best feasible iterate
+    BUDGET_EXCEEDED = "BUDGET_EXCEEDED"     # stored, but the solve took longer than the budget
+    INFEASIBLE = "INFEASIBLE"               # target out of reach: best effort stored, or kept
+    UNSAFE_RESULT = "UNSAFE_RESULT"         # the solver's result is not flyable: plan kept
+    SOLVER_FAILED = "SOLVER_FAILED"         # the solver raised: plan kept
+    INPUT_REJECTED = "INPUT_REJECTED"       # an estimate / request field is unusable
+    STALE = "STALE"                         # the estimate is older than staleness_s
+    FUTURE = "FUTURE"                       # every estimate is in the request's future
+    PLAN_ENDED = "PLAN_ENDED"               # no stage of the plan remains after the stamp
+    NO_ESTIMATE = "NO_ESTIMATE"             # no valid state and mass estimate yet
+    NOT_ACTIVE = "NOT_ACTIVE"               # request while the node is not active
+    CONFIGURE_FAILED = "CONFIGURE_FAILED"   # a parameter failed the configure transition
+    PARAMETER_REJECTED = "PARAMETER_REJECTED"
+    PLAN_ADOPTED = "PLAN_ADOPTED"           # a nominal or given plan is now in force
+    PLAN_FILE_ERROR = "PLAN_FILE_ERROR"     # plan_file / persist_file unreadable
+    RESTORED = "RESTORED"                   # a persisted plan restored after a restart
+    INTERNAL_ERROR = "INTERNAL_ERROR"       # a bug: reported, the node goes on
+
+    __str__ = str.__str__
+    __format__ = str.__format__
+
+
 @dataclass
 class Plan:
     """A valid control schedule anchored at ``epoch_s``.
@@ -99,6 +127,7 @@ class ReplanOutcome:
     plan: Plan | None
     iterations: dict = field(default_factory=dict)
     warm_start: bool = False
+    code: Code = Code.OK
 
 
 def write_plan_file(path: str | Path, plan: Plan, scenario: str) -> None:

@@ -27,7 +27,7 @@ from daddy_core.solver.stage_maps import StageMaps, expand_dynamics
 from .assessment import Assessment, assess
 from .checks import EstimateChecks
 from .config import PlannerConfig
-from .plan import (SATURATION_SLACK, Level, Plan, ReplanOutcome, read_plan_file,
+from .plan import (SATURATION_SLACK, Code, Level, Plan, ReplanOutcome, read_plan_file,
                    write_plan_file)
 from .replan_policy import LADDER_MIN_GAIN, ReplanPolicy, margin_ratings
 from .shift import MIN_STAGES_LEFT, Shifted, shift_plan
@@ -129,7 +129,7 @@ class GuidancePlanner:
         except Exception as exc:  # a solver fault must never take the plan down
             return ReplanOutcome(False, Level.ERROR, f"solver raised {type(exc).__name__}: "
                                  f"{exc}", request_id, time.perf_counter() - t0, None,
-                                 warm_start=warm)
+                                 warm_start=warm, code=Code.SOLVER_FAILED)
         best = self._climb(best, rung, start.U, opts)
         return self._adopt(best, shifted.problem, start.U, warm, stamp_s, request_id,
                            time.perf_counter() - t0)
@@ -183,26 +183,30 @@ class GuidancePlanner:
         failed = f" (solver raised on {'; '.join(best.failed_rungs)})" if best.failed_rungs else ""
         if not v.safe:
             return ReplanOutcome(False, Level.ERROR, v.reason + failed, request_id, dt, None,
-                                 sol.iterations, warm)
+                                 sol.iterations, warm, Code.UNSAFE_RESULT)
         if not v.feasible and warm:
             # a best-effort plan replaces the current one only if it is predicted to miss less
             old_miss = self.terminal_miss(best.problem, U_guess)
             if v.miss >= old_miss:
                 return ReplanOutcome(False, Level.WARN, f"kept the current plan: {v.reason}, and "
                                      f"no better than flying it (miss {old_miss:.2e}){failed}",
-                                     request_id, dt, None, sol.iterations, warm)
+                                     request_id, dt, None, sol.iterations, warm,
+                                     Code.INFEASIBLE)
         sol = replace(sol, U=v.U)   # the controls as flown (saturated onto the bound)
         plan = Plan.of(sol, v.X, stamp_s, self.units, best.problem.u_max, request_id, dt, warm)
         self.set_plan(plan)
-        level, reason = Level.OK, "re-optimised"
+        level, reason, code = Level.OK, "re-optimised", Code.OK
         if not v.feasible:
-            level, reason = Level.WARN, f"best effort within the thrust bound: {v.reason}{failed}"
+            level, reason, code = (Level.WARN, f"best effort within the thrust bound: "
+                                   f"{v.reason}{failed}", Code.INFEASIBLE)
         elif not sol.converged:
-            level, reason = Level.WARN, f"stored best feasible iterate: {sol.reason}"
+            level, reason, code = (Level.WARN, f"stored best feasible iterate: {sol.reason}",
+                                   Code.NOT_CONVERGED)
         if dt > self.time_budget_s:
-            level, reason = Level.WARN, (f"solve took {dt:.3g} s, over the "
-                                         f"{self.time_budget_s:.3g} s budget")
-        return ReplanOutcome(True, level, reason, request_id, dt, plan, sol.iterations, warm)
+            level, code = Level.WARN, Code.BUDGET_EXCEEDED
+            reason = f"solve took {dt:.3g} s, over the {self.time_budget_s:.3g} s budget"
+        return ReplanOutcome(True, level, reason, request_id, dt, plan, sol.iterations, warm,
+                             code)
 
     @property
     def _feasibility_tol(self) -> float:

@@ -15,7 +15,7 @@ from collections import deque
 from dataclasses import dataclass
 
 from .checks import FUTURE_TOLERANCE_S, InputRejected
-from .plan import TIME_TOLERANCE_S, Level
+from .plan import TIME_TOLERANCE_S, Code, Level
 
 STATE_HISTORY = 64   # accepted estimates kept to serve requests stamped in their past
 # a request stamped after the newest estimate waits this long for the estimate of its time
@@ -89,7 +89,7 @@ class RequestQueue:
         if not usable:
             ahead = min(s.stamp_s for s in states) - request_stamp
             raise InputRejected(f"every state_estimate is in the future of the request stamp "
-                                f"(the oldest by {ahead:.3g} s)")
+                                f"(the oldest by {ahead:.3g} s)", Code.FUTURE)
         return max(usable, key=lambda s: s.stamp_s)
 
     def mass_for(self, stamp_s: float) -> float | None:

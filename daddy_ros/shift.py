@@ -18,7 +18,7 @@ from daddy_core.problem import Problem
 from daddy_core.solver import WarmStart
 
 from .checks import InputRejected
-from .plan import TIME_TOLERANCE_S, Plan
+from .plan import TIME_TOLERANCE_S, Code, Plan
 
 # a first remaining stage shorter than this fraction of a nominal stage is merged into the next
 MIN_STAGE_FRACTION = 0.25
@@ -53,7 +53,8 @@ def shift_plan(base: Problem, plan: Plan | None, t_s: float, x0: np.ndarray, uni
     bounds = plan.epoch_s + np.cumsum(plan.stage_dt_s)          # stage end times
     k0 = int(np.searchsorted(bounds, t_s + TIME_TOLERANCE_S, side="right"))
     if k0 >= len(plan.stage_dt_s):
-        raise InputRejected("the plan has ended: no stage remains after header.stamp")
+        raise InputRejected("the plan has ended: no stage remains after header.stamp",
+                            Code.PLAN_ENDED)
     first = bounds[k0] - t_s
     dts = plan.stage_dt_s[k0:].astype(float).copy()
     U = plan.solution.U[k0:].copy()

@@ -76,7 +76,7 @@ def test_nominal_then_replan_publishes_valid_schedule(graph):
     for key in ("request_id", "solve_time_s", "max_violation", "final_mass_kg", "method",
                 "warm_start", "thrust_bound_n"):
         assert key in vals
-    assert vals["warm_start"] == "yes"
+    assert vals["warm_start"] == "yes" and vals["code"] == "OK"
     bound = float(vals["thrust_bound_n"])          # a rung of the margin ladder: 95-100 % of 0.5 N
     assert 0.95 * 0.5 * (1 - 1e-9) <= bound <= 0.5 * (1 + 1e-9)
     sched = c.wait_for(lambda: [s for _, s in c.schedules
@@ -148,6 +148,7 @@ def test_malformed_estimates_rejected_at_arrival_and_plan_kept(graph, case):
                               if expect in d.status[0].message], 10)
     assert got, f"no diagnostic naming {expect!r}"
     assert got[0].level == DiagnosticStatus.ERROR and "rejected" in got[0].message
+    assert {kv.key: kv.value for kv in got[0].values}["code"] == "INPUT_REJECTED"
     assert node.planner.plan is plan_before  # the last valid plan is kept
     _, u = cv.joint_trajectory_to_schedule(c.schedules[-1][1])
     assert np.all(np.isfinite(u))
@@ -168,6 +169,7 @@ def test_requests_without_a_usable_estimate_are_rejected(graph, case):
     st = c.wait_for(lambda: c.status_for(rid), 30)
     assert st, f"no diagnostics for {rid}"
     assert st.level == DiagnosticStatus.ERROR and case in st.message, st.message
+    assert {kv.key: kv.value for kv in st.values}["code"] == case.upper()   # FUTURE / STALE
     assert node.planner.plan is plan_before
 
 
@@ -251,7 +253,8 @@ def test_lifecycle_transitions_gate_thrust_and_requests(graph):
         assert state() == "unconfigured"
         assert c.wait_for(lambda: [d for _, d in c.diags
                                    if "configure failed" in d.status[0].message
-                                   and "thrust_margin" in d.status[0].message], 10)
+                                   and "thrust_margin" in d.status[0].message
+                                   and "CONFIGURE_FAILED" in str(d.status[0].values)], 10)
         resp, _ = c.call(c.set_params, SetParameters.Request(parameters=[
             Parameter("thrust_margin", value=0.05).to_parameter_msg()]), 10.0)
         assert resp.results[0].successful, "parameters are editable while unconfigured"
@@ -264,7 +267,8 @@ def test_lifecycle_transitions_gate_thrust_and_requests(graph):
             time.sleep(0.05)
         c.request("while-inactive", T0)
         assert c.wait_for(lambda: [d for _, d in c.diags if "while-inactive" in str(
-            d.status[0].values) and "not active" in d.status[0].message], 10)
+            d.status[0].values) and "not active" in d.status[0].message
+            and "NOT_ACTIVE" in str(d.status[0].values)], 10)
         assert change(Transition.TRANSITION_ACTIVATE) and state() == "active"
         assert fly_until_thrust(T0 + 1.0), "no thrust command while active"
         assert c.wait_for(lambda: c.schedules, 15)
