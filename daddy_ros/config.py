@@ -20,9 +20,14 @@ def bundled_plan(case_name: str, fuel_optimal: bool = True) -> Path | None:
     return p if p.exists() else None
 
 
-def _param(default, description: str, runtime: bool = False):
-    """A dataclass field that is also a node parameter (``runtime``: settable after start-up)."""
-    return field(default=default, metadata={"description": description, "runtime": runtime})
+def _param(default, description: str, runtime: bool = False, static: bool = False,
+           bounds: tuple | None = None):
+    """A dataclass field that is also a node parameter. ``runtime``: settable in every
+    lifecycle state (the others only while unconfigured); ``static``: read when the node is
+    constructed, so never settable afterwards (a read-only descriptor); ``bounds``: the
+    (lowest, highest) value, a range in the descriptor that rclpy enforces."""
+    return field(default=default, metadata={"description": description, "runtime": runtime,
+                                            "static": static, "bounds": bounds})
 
 
 @dataclass(frozen=True)
@@ -34,27 +39,29 @@ class PlannerConfig:
     method: str = _param("dyn", f"DDP method, one of {', '.join(METHODS)}")
     polish: bool = _param(True, "Newton polishing after each re-optimisation")
     fuel_optimal: bool = _param(True, "fuel-optimal cost (else energy-optimal)")
-    stages: int = _param(0, "stage count of the scenario (0: the case's own)")
+    stages: int = _param(0, "stage count of the scenario (0: the case's own)",
+                         bounds=(0, 100_000))
     tol_aul: float = _param(0.0, "augmented-Lagrangian tolerance (0: the case's own for cold "
                                  "solves, 1e-5 for polished warm re-optimisations, which Newton "
-                                 "then takes to tol_newton)")
-    tol_newton: float = _param(0.0, "Newton polishing tolerance (0: the case's own)")
+                                 "then takes to tol_newton)", bounds=(0.0, 1.0))
+    tol_newton: float = _param(0.0, "Newton polishing tolerance (0: the case's own)",
+                               bounds=(0.0, 1.0))
     time_budget_s: float = _param(60.0, "wall-clock budget of one re-optimisation [s]",
-                                  runtime=True)
+                                  runtime=True, bounds=(1e-3, 86_400.0))
     restore_first: bool = _param(True, "restore feasibility of the warm start by Newton before "
                                        "DDP, so a re-optimisation stopped by its budget still "
                                        "yields a feasible plan (and re-plans are faster)")
     arrival_tolerance_m: float = _param(0.0, "in the arrival phase (the last re-gridded stages) "
                                              "the terminal position may be this far from the "
                                              "target, the velocity stays exact [m]; 0: position "
-                                             "exact too")
+                                             "exact too", bounds=(0.0, 1e9))
     thrust_margin: float = _param(0.05, "fraction of the thrust rating plans hold back for "
                                         "closed-loop corrections; a re-optimisation gives it up "
                                         "in steps (with 0.05: 95, 97, 98.5, 100 % of the "
                                         "rating) only when the target is out of reach "
-                                        "otherwise; 0: the full rating")
+                                        "otherwise; 0: the full rating", bounds=(0.0, 0.99))
     staleness_s: float = _param(600.0, "estimates older than this relative to the request are "
-                                       "rejected [s]", runtime=True)
+                                       "rejected [s]", runtime=True, bounds=(1e-3, 1e9))
     # a mass estimate may exceed the wet mass by this [kg] (not a node parameter)
     mass_tolerance_kg: float = 1e-6
 
@@ -72,10 +79,12 @@ class NodeConfig:
 
     autostart: bool = _param(True, "configure and activate at start-up (a plain `ros2 run`); "
                                    "false: an external lifecycle manager drives the "
-                                   "transitions through the standard lifecycle services")
+                                   "transitions through the standard lifecycle services",
+                             static=True)
     diagnostics_period_s: float = _param(1.0, "period of the node's health status on "
                                               "/diagnostics [s] (lifecycle state, plan age, "
-                                              "next stage, last solve); 0: none")
+                                              "next stage, last solve); 0: none",
+                                         static=True, bounds=(0.0, 3600.0))
     frame_id: str = _param("earth_moon_rotating", "frame of state estimates and thrust")
     plan_file: str = _param("", "nominal plan (solution JSON) adopted at the first estimate; "
                                 "empty: the bundled nominal of the scenario if any, else a cold "
@@ -86,23 +95,28 @@ class NodeConfig:
     state_topic: str = _param("state_estimate", "nav_msgs/Odometry input")
     mass_topic: str = _param("mass_estimate", "geometry_msgs/InertiaStamped input (kg)")
     request_topic: str = _param("replan_request", "std_msgs/Header input: frame_id = request id")
-    schedule_topic: str = _param("control_schedule", "trajectory_msgs/JointTrajectory output (N)")
-    thrust_topic: str = _param("thrust_command", "geometry_msgs/Vector3Stamped output (N)")
-    path_topic: str = _param("planned_path", "nav_msgs/Path output (m)")
+    schedule_topic: str = _param("control_schedule", "trajectory_msgs/JointTrajectory output (N)",
+                                 static=True)
+    thrust_topic: str = _param("thrust_command", "geometry_msgs/Vector3Stamped output (N)",
+                               static=True)
+    path_topic: str = _param("planned_path", "nav_msgs/Path output (m)", static=True)
 
 
 @dataclass(frozen=True)
 class Parameter:
-    """One node parameter: its name, default, description and whether it may change at run
-    time."""
+    """One node parameter: its name, default, description, when it may change (``_param``)
+    and its bounds."""
 
     name: str
     default: object
     description: str
     runtime: bool
+    static: bool = False
+    bounds: tuple | None = None
 
 
 def parameters() -> list[Parameter]:
     """The node's parameters in declaration order: the planner's, then the node's own."""
-    return [Parameter(f.name, f.default, f.metadata["description"], f.metadata["runtime"])
+    return [Parameter(f.name, f.default, f.metadata["description"], f.metadata["runtime"],
+                      f.metadata["static"], f.metadata["bounds"])
             for cls in (PlannerConfig, NodeConfig) for f in fields(cls) if f.metadata]

@@ -19,8 +19,10 @@ from diagnostic_msgs.msg import DiagnosticArray
 from geometry_msgs.msg import InertiaStamped, Vector3Stamped
 from nav_msgs.msg import Odometry
 from nav_msgs.msg import Path as PathMsg
-from rcl_interfaces.msg import ParameterDescriptor, SetParametersResult
+from rcl_interfaces.msg import (FloatingPointRange, IntegerRange, ParameterDescriptor,
+                                SetParametersResult)
 from rclpy.callback_groups import MutuallyExclusiveCallbackGroup, ReentrantCallbackGroup
+from rclpy.exceptions import InvalidParameterTypeException, InvalidParameterValueException
 from rclpy.executors import SingleThreadedExecutor
 from rclpy.lifecycle import LifecycleNode, State, TransitionCallbackReturn
 from rclpy.node import Node
@@ -53,6 +55,23 @@ NAMES = {p.name for p in parameters()}
 RUNTIME = {p.name for p in parameters() if p.runtime}   # time_budget_s, staleness_s
 
 
+def _descriptor(p) -> ParameterDescriptor:
+    """The ROS descriptor of a ``config`` parameter: its description, read_only for the
+    ``static`` ones, its range where it has bounds, and when it may change."""
+    when = ("settable in every state" if p.runtime else "fixed at construction" if p.static
+            else "settable while unconfigured")
+    d = ParameterDescriptor(description=p.description, read_only=p.static,
+                            additional_constraints=when)
+    if p.bounds is not None:
+        lo, hi = p.bounds
+        if isinstance(p.default, float):
+            d.floating_point_range = [FloatingPointRange(from_value=float(lo), to_value=float(hi),
+                                                         step=0.0)]
+        else:
+            d.integer_range = [IntegerRange(from_value=int(lo), to_value=int(hi), step=1)]
+    return d
+
+
 class GuidanceNode(LifecycleNode):
     """The guidance node as a managed (lifecycle) node, as nav2's servers are:
 
@@ -79,8 +98,11 @@ class GuidanceNode(LifecycleNode):
         defaults."""
         super().__init__(NODE_NAME, namespace=namespace)
         for p in parameters():
-            self.declare_parameter(p.name, overrides.get(p.name, p.default),
-                                   ParameterDescriptor(description=p.description))
+            try:
+                self.declare_parameter(p.name, overrides.get(p.name, p.default), _descriptor(p))
+            except (InvalidParameterValueException, InvalidParameterTypeException) as exc:
+                self.destroy_node()
+                raise DaddyError(f"parameter {p.name}: {exc}") from exc
         self.add_on_set_parameters_callback(self._on_set_parameters)
         self.service_node = Node(f"{NODE_NAME}_service", namespace=self.get_namespace(),
                                  use_global_arguments=False, start_parameter_services=False,

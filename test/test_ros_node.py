@@ -221,8 +221,8 @@ def test_lifecycle_transitions_gate_thrust_and_requests(graph):
 
     from daddy_ros.spin import SpinThread
     ns = "/lc"
-    node = GuidanceNode(namespace=ns, scenario="earth_mars", frame_id=FRAME,
-                        time_budget_s=60.0, autostart=False, thrust_margin=2.0)
+    node = GuidanceNode(namespace=ns, scenario="no_such_case", frame_id=FRAME,
+                        time_budget_s=60.0, autostart=False)
     spin = SpinThread(node)
     c = GuidanceClient(FRAME, name="daddy_lifecycle_client", namespace=ns)
     pos, vel, mass = truth_at_start()
@@ -249,14 +249,14 @@ def test_lifecycle_transitions_gate_thrust_and_requests(graph):
 
     try:
         assert state() == "unconfigured"
-        assert not change(Transition.TRANSITION_CONFIGURE), "thrust_margin 2.0 must fail"
+        assert not change(Transition.TRANSITION_CONFIGURE), "an unknown scenario must fail"
         assert state() == "unconfigured"
         assert c.wait_for(lambda: [d for _, d in c.diags
                                    if "configure failed" in d.status[0].message
-                                   and "thrust_margin" in d.status[0].message
+                                   and "no_such_case" in d.status[0].message
                                    and "CONFIGURE_FAILED" in str(d.status[0].values)], 10)
         resp, _ = c.call(c.set_params, SetParameters.Request(parameters=[
-            Parameter("thrust_margin", value=0.05).to_parameter_msg()]), 10.0)
+            Parameter("scenario", value="earth_mars").to_parameter_msg()]), 10.0)
         assert resp.results[0].successful, "parameters are editable while unconfigured"
         assert change(Transition.TRANSITION_CONFIGURE) and state() == "inactive"
         end = time.monotonic() + 15
@@ -345,3 +345,25 @@ def test_two_namespaced_instances_publish_distinct_live_health(graph):
         for n in nodes:
             n.stop()
             n.destroy_node()
+
+
+def test_parameter_descriptors_carry_read_only_flags_and_ranges(graph):
+    """Descriptors as tools show them: the parameters read at construction are read_only,
+    bounded ones carry their range (rclpy refuses a value outside it, and a constructor given
+    one raises DaddyError naming the parameter), and each says when it may change."""
+    from rclpy.parameter import Parameter
+
+    from daddy_core.errors import DaddyError
+    node, _ = graph
+    d = node.describe_parameter("autostart")
+    assert d.read_only and "construction" in d.additional_constraints
+    d = node.describe_parameter("thrust_margin")
+    assert not d.read_only and d.floating_point_range[0].to_value == pytest.approx(0.99)
+    assert node.describe_parameter("stages").integer_range[0].to_value == 100_000
+    assert "every state" in node.describe_parameter("time_budget_s").additional_constraints
+    results = node.set_parameters([Parameter("time_budget_s", value=1e6),
+                                   Parameter("thrust_topic", value="elsewhere")])
+    assert not results[0].successful and not results[1].successful
+    assert node.get_parameter("time_budget_s").value == pytest.approx(60.0)
+    with pytest.raises(DaddyError, match="thrust_margin"):
+        GuidanceNode(namespace="/bad", scenario="earth_mars", frame_id=FRAME, thrust_margin=2.0)
