@@ -357,7 +357,9 @@ def test_config_yaml_lists_every_node_parameter_with_its_default():
 
     from daddy_ros.config import PlannerConfig, parameters
     path = Path(__file__).parents[1] / "config" / "guidance.yaml"
-    listed = yaml.safe_load(path.read_text())["daddy_guidance"]["ros__parameters"]
+    # "/**/daddy_guidance": the file applies to the node in any namespace (a plain
+    # "daddy_guidance" key only to the root namespace's)
+    listed = yaml.safe_load(path.read_text())["/**/daddy_guidance"]["ros__parameters"]
     declared = {p.name: p.default for p in parameters()}
     assert listed == declared
     assert all(type(listed[k]) is type(v) for k, v in declared.items())   # 0.0 stays a float
