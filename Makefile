@@ -10,6 +10,7 @@ VENV := .venv
 PY := $(VENV)/bin/python
 STAMP := $(VENV)/.bootstrapped
 PLOTS := $(VENV)/.plots
+RECORD := $(VENV)/.record
 PIP := $(PY) -m pip install --disable-pip-version-check -q -c requirements/pins.txt
 
 # Every rclpy process: discovery on loopback only, a per-run domain, logs in a temp dir.
@@ -44,11 +45,16 @@ $(PLOTS): $(STAMP) requirements/plots.txt
 	@$(PIP) -r requirements/plots.txt && touch $@ || \
 	  echo "plots: matplotlib could not be installed; the demo will skip its plot"
 
+# The record extra (mcap): gnc_demo --record FILE.mcap; the tests read a recording back.
+$(RECORD): $(STAMP) requirements/record.txt
+	@$(PIP) -r requirements/record.txt && touch $@ || \
+	  echo "record: mcap could not be installed; gnc_demo --record will say so"
+
 DEMO_CASE ?= halo_l2_l1
 demo: $(STAMP) $(PLOTS)
 	$(VENV)/bin/gnc_demo --case $(DEMO_CASE)
 
-test: $(STAMP) $(PLOTS)
+test: $(STAMP) $(PLOTS) $(RECORD)
 	$(PY) -m pytest -q test
 
 test-slow: $(STAMP)

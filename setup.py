@@ -18,7 +18,7 @@ setup(
         ("share/" + package_name + "/launch", glob("launch/*.py")),
     ],
     install_requires=["setuptools", "numpy", "scipy"],
-    extras_require={"plots": ["matplotlib"]},
+    extras_require={"plots": ["matplotlib"], "record": ["mcap", "mcap-ros2-support"]},
     zip_safe=True,
     maintainer="daddy team",
     maintainer_email="daddy@example.invalid",

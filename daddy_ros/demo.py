@@ -271,6 +271,8 @@ def main(argv=None) -> int:
     ap.add_argument("--time-budget", type=float, default=60.0)
     ap.add_argument("--no-errors", action="store_true", help="perfect navigation and execution")
     ap.add_argument("--plot", default="out/gnc_demo.png", help="PNG of flown vs planned")
+    ap.add_argument("--record", metavar="FILE.mcap", default="",
+                    help="record every topic of the ROS run to an MCAP file (the record extra)")
     args = ap.parse_args(argv)
     os.environ["ROS_AUTOMATIC_DISCOVERY_RANGE"] = "LOCALHOST"  # the demo stays on loopback
     errors = Errors(0, 0, 0, 0) if args.no_errors else Errors()
@@ -324,6 +326,10 @@ def _ros_demo(args, planner, errors, m_open, m0) -> int:
     rclpy.init(signal_handler_options=SignalHandlerOptions.NO)
     guidance = GuidanceNode(scenario=args.case, time_budget_s=args.time_budget,
                             arrival_tolerance_m=args.arrival_tolerance_km * 1e3)
+    recorder = None
+    if args.record:   # before anything is published: the recorder sees the whole run
+        from .recording import McapRecorder
+        recorder = McapRecorder(args.record, guidance.interface_topics())
     guidance.adopt_plan(planner.plan)            # the nominal plan, anchored at T0
     link = RosLink(guidance.frame_id, timeout_s=3 * args.time_budget + 30)
     spinner = SpinThread(guidance)
@@ -335,6 +341,10 @@ def _ros_demo(args, planner, errors, m_open, m0) -> int:
         r = fly(link, sim, guidance.planner, progress=lambda s: print(s, flush=True),
                 **_loop_settings(args))
     finally:
+        if recorder is not None:
+            counts = recorder.close()
+            print(f"recorded {sum(counts.values())} messages to {args.record}: "
+                  + ", ".join(f"{t} {n}" for t, n in counts.items()), flush=True)
         guidance.stop()
         spinner.shutdown(timeout_sec=2.0)
         link.close()

@@ -136,6 +136,18 @@ class GuidanceNode(LifecycleNode):
                 raise DaddyError(self._configure_error or "configure failed")
             self.trigger_activate()
 
+    def interface_topics(self) -> dict:
+        """{absolute topic: (message class, QoS)} of every topic the node reads or writes, with
+        the QoS it uses (for a recorder: the latched outputs are transient local)."""
+        g = lambda n: self.resolve_topic_name(self.get_parameter(n).value)  # noqa: E731
+        return {g("state_topic"): (Odometry, qos_profile_sensor_data),
+                g("mass_topic"): (InertiaStamped, qos_profile_sensor_data),
+                g("request_topic"): (Header, RELIABLE),
+                g("schedule_topic"): (JointTrajectory, LATCHED),
+                g("path_topic"): (PathMsg, LATCHED),
+                g("thrust_topic"): (Vector3Stamped, RELIABLE),
+                "/diagnostics": (DiagnosticArray, RELIABLE)}
+
     @property
     def lifecycle_state(self) -> str:
         """The current lifecycle state's label (unconfigured, inactive, active, finalized)."""

@@ -367,3 +367,49 @@ def test_parameter_descriptors_carry_read_only_flags_and_ranges(graph):
     assert node.get_parameter("time_budget_s").value == pytest.approx(60.0)
     with pytest.raises(DaddyError, match="thrust_margin"):
         GuidanceNode(namespace="/bad", scenario="earth_mars", frame_id=FRAME, thrust_margin=2.0)
+
+
+def test_recording_writes_every_topic_and_a_schedule_round_trips(graph, tmp_path):
+    """McapRecorder (gnc_demo --record) on the node's interface topics: every topic of a short
+    session is in the file with its ros2msg schema, the file decodes with the standard MCAP
+    ROS 2 decoder, and the recorded schedule is the one the client received."""
+    pytest.importorskip("mcap_ros2", reason="the record extra (make test installs it)")
+    from mcap.reader import make_reader
+    from mcap_ros2.decoder import DecoderFactory
+
+    from daddy_ros.recording import McapRecorder
+    node, c = graph
+    path = tmp_path / "run.mcap"
+    rec = McapRecorder(path, node.interface_topics(), node_name="daddy_test_recorder")
+    end = time.monotonic() + 15
+    while time.monotonic() < end and rec.node.count_publishers("/state_estimate") == 0:
+        time.sleep(0.05)
+    pos, vel, mass = truth_at_start()
+    t = T0 + 20.0   # (the first estimates adopt the nominal plan when no test did before)
+    n_sched = len(c.schedules)
+    end = time.monotonic() + 20
+    while time.monotonic() < end and not (rec.counts["/state_estimate"]
+                                          and rec.counts["/thrust_command"]):
+        c.publish_estimate(pos, vel, mass, t)
+        time.sleep(0.2)
+    c.request("recorded", t)
+    assert c.wait_for(lambda: c.status_for("recorded"), 60)
+    assert c.wait_for(lambda: len(c.schedules) > n_sched, 15)
+    time.sleep(0.5)   # the last messages reach the recorder too
+    counts = rec.close()
+    for topic in ("/state_estimate", "/mass_estimate", "/replan_request", "/control_schedule",
+                  "/planned_path", "/thrust_command", "/diagnostics"):
+        assert counts[topic] > 0, f"nothing recorded on {topic}: {counts}"
+    seen, last_schedule = {}, None
+    with open(path, "rb") as f:
+        for schema, channel, message, decoded in make_reader(
+                f, decoder_factories=[DecoderFactory()]).iter_decoded_messages():
+            seen[channel.topic] = seen.get(channel.topic, 0) + 1
+            assert schema.encoding == "ros2msg" and channel.message_encoding == "cdr"
+            if channel.topic == "/control_schedule":
+                last_schedule = decoded
+    assert seen == counts
+    starts, u = cv.joint_trajectory_to_schedule(c.schedules[-1][1])
+    assert list(last_schedule.joint_names) == ["thrust_x", "thrust_y", "thrust_z"]
+    rec_u = np.array([list(p.effort) for p in last_schedule.points])
+    np.testing.assert_array_equal(rec_u, u)
