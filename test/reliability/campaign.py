@@ -642,7 +642,13 @@ def solver_faults(sizes: Sizes, workdir: Path) -> list[Row]:
 # ---------------------------------------------------------------------------- process faults
 def process_faults(sizes: Sizes, workdir: Path, progress=None) -> list[Row]:
     """Kill -9 the node mid-transfer and restart it with the same persist_file: it restores the
-    persisted plan, re-plans at the first estimate, and the closed-loop demo reaches the target."""
+    persisted plan, re-plans at the first estimate, and the closed-loop demo reaches the target.
+    After the restarts the node is also deactivated for one re-plan interval through its
+    lifecycle service and activated again: no thrust command for an estimate sent while it is
+    inactive, the request then refused (NOT_ACTIVE), and the transfer still reaches the target."""
+    from lifecycle_msgs.msg import Transition
+    from lifecycle_msgs.srv import ChangeState
+
     from daddy_ros.demo import RosLink, fly
     from daddy_ros.sim import Errors, TruthSim
 
@@ -659,11 +665,32 @@ def process_faults(sizes: Sizes, workdir: Path, progress=None) -> list[Row]:
         sim = TruthSim(SCENARIO, Errors(0, 0, 0, 0), t0_s=T0_S)
         count = {"replans": 0, "kills": 0}
         kill_at = {2 + 2 * k for k in range(sizes.kills)}
-        inner = link.replan
+        pause_at = max(kill_at) + 2       # deactivated for this re-plan, activated at the next
+        inactive = {"stamps": [], "on": False, "refused": None}
+        inner, publish = link.replan, link.publish_estimate
+
+        def change(tid):
+            resp, _ = c.call(c.change_state, ChangeState.Request(
+                transition=Transition(id=tid)), 30.0)
+            return resp is not None and resp.success
+
+        def publish_estimate(pos, vel, mass, t_s):
+            if inactive["on"]:
+                inactive["stamps"].append(t_s)
+            publish(pos, vel, mass, t_s)
 
         def replan(pos, vel, mass, t_s, rid):
             nonlocal node
             count["replans"] += 1
+            if count["replans"] == pause_at:
+                row.check(change(Transition.TRANSITION_DEACTIVATE), "deactivate refused")
+                inactive["on"] = True
+                level, lat = inner(pos, vel, mass, t_s, rid)
+                inactive["refused"] = level
+                return level, lat
+            if count["replans"] == pause_at + 1:
+                inactive["on"] = False
+                row.check(change(Transition.TRANSITION_ACTIVATE), "activate refused")
             if count["replans"] in kill_at:
                 t0 = time.time()
                 node.kill()
@@ -678,6 +705,7 @@ def process_faults(sizes: Sizes, workdir: Path, progress=None) -> list[Row]:
             return inner(pos, vel, mass, t_s, rid)
 
         link.replan = replan
+        link.publish_estimate = publish_estimate
         try:
             # the node adopts its nominal at the first estimate: publish until it is latched
             end = time.monotonic() + 30.0
@@ -690,6 +718,14 @@ def process_faults(sizes: Sizes, workdir: Path, progress=None) -> list[Row]:
         finally:
             link.close()
             node.stop()
+        from daddy_ros import conversions as cv
+        with c.cond:
+            thrust_stamps = [cv.stamp_to_s(m.header.stamp) for _, m in c.thrust]
+        leaked = [s for s in inactive["stamps"] if any(abs(s - x) < 1e-6 for x in thrust_stamps)]
+        row.check(bool(inactive["stamps"]) and not leaked,
+                  f"thrust_command published while inactive for {leaked or 'no estimate sent'}")
+        row.check(str(inactive["refused"]).startswith("ERROR"),
+                  f"the request while inactive was answered {inactive['refused']}")
         ok = (r["miss_km"] <= 1.0 and r["miss_cm_s"] <= 1.0
               and abs(r["final_mass_kg"] - m_open) <= 0.01 * (planner.case.spacecraft.wet_mass_kg
                                                                - m_open))
