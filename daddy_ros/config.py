@@ -74,6 +74,29 @@ class PlannerConfig:
 
 
 @dataclass(frozen=True)
+class TriggerConfig:
+    """When the node re-plans by itself (``self_trigger``): every ``replan_every_stages``-th
+    stage boundary, on drift from its prediction of the schedule in force, and on every
+    estimate of the arrival phase. 0 turns a rule off."""
+
+    self_replan: bool = _param(True, "re-plan by itself (stage boundaries, drift, arrival "
+                                     "phase); false: only on requests")
+    replan_every_stages: int = _param(1, "re-plan at every n-th stage boundary of the "
+                                         "transfer's nominal grid (0: never)",
+                                      bounds=(0, 100_000))
+    trigger_position_m: float = _param(5000.0, "re-plan when the estimate drifts this far from "
+                                               "the predicted flight of the schedule in force "
+                                               "[m] (0: no position test)", bounds=(0.0, 1e12))
+    trigger_velocity_m_s: float = _param(0.05, "... or this fast [m/s] (0: no velocity test)",
+                                         bounds=(0.0, 1e6))
+    arrival_stages: int = _param(2, "the arrival phase: the last n nominal stages, where every "
+                                    "estimate re-plans (0: none)", bounds=(0, 100_000))
+    arrival_min_step: float = _param(1 / 256, "... until less than this fraction of a nominal "
+                                              "stage remains (the last open-loop interval)",
+                                     bounds=(0.0, 1.0))
+
+
+@dataclass(frozen=True)
 class NodeConfig:
     """The node's frame, files and topic names."""
 
@@ -119,4 +142,5 @@ def parameters() -> list[Parameter]:
     """The node's parameters in declaration order: the planner's, then the node's own."""
     return [Parameter(f.name, f.default, f.metadata["description"], f.metadata["runtime"],
                       f.metadata["static"], f.metadata["bounds"])
-            for cls in (PlannerConfig, NodeConfig) for f in fields(cls) if f.metadata]
+            for cls in (PlannerConfig, TriggerConfig, NodeConfig) for f in fields(cls)
+            if f.metadata]

@@ -3,10 +3,11 @@
     gnc_demo [--case halo_l2_l1|earth_mars] [--replan-every K] [--plot FILE] [--seed S]
     gnc_demo --runs 100            # Monte Carlo, same guidance logic called directly (no graph)
 
-The simulator publishes noisy state and mass estimates, asks for a re-optimisation every K
-stages (and on every sub-step of the final stages), applies the schedule it receives with
-execution errors, and reports the terminal miss, the propellant against the open-loop optimum,
-the number of re-optimisations and their latency.
+The simulator is a thin client: it publishes noisy state and mass estimates on its time grid
+and flies the schedule it receives with execution errors. The node decides the re-plans itself
+(``self_trigger``: every K stages, on drift from its prediction, on every estimate of the
+arrival phase); the Monte Carlo runs the same policy in-process. It reports the terminal miss,
+the propellant against the open-loop optimum, the number of re-optimisations and their latency.
 """
 from __future__ import annotations
 
@@ -15,31 +16,42 @@ import concurrent.futures
 import os
 import statistics
 import time
+from dataclasses import asdict
 from pathlib import Path
 
 import numpy as np
 
 from .checks import InputRejected
-from .config import bundled_plan
+from .config import TriggerConfig, bundled_plan
 from .plan import Level
 from .planner import GuidancePlanner
+from .self_trigger import Reason, ReplanTrigger
 from .sim import T0_S, Errors, TruthSim
 
 
 class DirectLink:
-    """Guidance called in-process (Monte Carlo mode)."""
+    """Guidance called in-process (Monte Carlo mode): the node's re-plan policy
+    (``ReplanTrigger``) and planner, without the graph."""
 
-    def __init__(self, planner: GuidancePlanner):
+    def __init__(self, planner: GuidancePlanner, policy: TriggerConfig):
         self.planner = planner
+        base = planner.base_problem
+        self.trigger = ReplanTrigger(planner.case, policy,
+                                     float(planner.units.time_s(base.stage_dt[0])), base.N)
 
-    def replan(self, pos, vel, mass, t_s, rid):
+    def estimate(self, pos, vel, mass, t_s, rid):
+        """An estimate, as the node takes it: (reason, level, latency s) of the re-plan it
+        triggered, or None."""
+        reason = self.trigger.observe(t_s, pos, vel, mass, self.planner.plan)
+        if reason is None:
+            return None
+        self.trigger.replanned(t_s, pos, vel, mass)
         t0 = time.perf_counter()
         try:
-            out = self.planner.replan(pos, vel, mass, t_s, rid, now_s=t_s)
-            level = out.level
+            level = self.planner.replan(pos, vel, mass, t_s, rid, now_s=t_s).level
         except InputRejected as exc:
             level = f"ERROR {exc}"
-        return level, time.perf_counter() - t0
+        return reason, level, time.perf_counter() - t0
 
     def thrust_at(self, t_s, pos, vel, mass):
         plan = self.planner.plan
@@ -50,12 +62,19 @@ class DirectLink:
         return plan.epoch_s + plan.stage_start_s if plan else np.zeros(0)
 
 
+# a thrust command later than this after its estimate was withheld for a re-plan (a solve takes
+# tens of milliseconds at least; an immediate command, ~2 ms: bench/bench_intake.py)
+SELF_REPLAN_HINT_S = 0.02
+
+
 class RosLink:
     """Guidance over ROS 2 topics (``client.GuidanceClient``): the GNC side of the loop
-    (estimates and requests out, schedules and diagnostics in)."""
+    (estimates out; thrust commands, schedules and diagnostics in)."""
 
     def __init__(self, frame_id: str, timeout_s: float):
         from .client import GuidanceClient
+        from .conversions import stamp_to_s
+        self._stamp_s = stamp_to_s
         self.client = GuidanceClient(frame_id, name="daddy_gnc_sim")
         self.node = self.client.node
         self.timeout_s = timeout_s
@@ -71,22 +90,50 @@ class RosLink:
                                and c.pub_req.get_subscription_count()
                                and c.pub_mass.get_subscription_count(), timeout_s))
 
-    def replan(self, pos, vel, mass, t_s, rid):
+    def estimate(self, pos, vel, mass, t_s, rid):
+        """Publish an estimate and wait for its thrust command: the node withholds it while a
+        re-plan the estimate triggered runs (``self_trigger``), so the simulated loop flies on
+        only once guidance has answered. (reason, level, latency s) of that re-plan, or None.
+        ``rid`` is unused: the node names its own re-plans."""
         c = self.client
-        self.publish_estimate(pos, vel, mass, t_s)
-        time.sleep(0.02)  # let the estimate arrive before the request (same reliable link)
-        t0 = time.perf_counter()
         n_diags = len(c.diags)
-        c.request(rid, t_s)
-        diag = c.wait_for(lambda: c.diag_for(rid, n_diags), self.timeout_s)
-        level, text, vals = diag or (None, "timeout", {})
-        # when a new plan was stored, wait for its schedule (latched, stamped with the estimate
-        # time); otherwise the last valid schedule stays in force
-        if vals.get("plan_kept") == "no":
+        t0 = time.perf_counter()
+        self.publish_estimate(pos, vel, mass, t_s)
+        if not c.wait_for(lambda: self._thrust_for(t_s), self.timeout_s):
+            return None, f"ERROR no thrust command for the estimate at {t_s:.3f} s", \
+                time.perf_counter() - t0
+        lat = time.perf_counter() - t0
+        # a withheld command took a solve (>= tens of ms); the re-plan's diagnostic was
+        # published before it: allow it a moment to arrive on its own topic
+        wait = 0.5 if lat > SELF_REPLAN_HINT_S else 0.0
+        diag = c.wait_for(lambda: self._self_replan(t_s, n_diags), wait) or \
+            self._self_replan(t_s, n_diags)
+        if not diag:
+            return None
+        rid_self, (level, text, vals) = diag
+        if vals.get("plan_kept") == "no":   # its schedule is stamped with the estimate time
             c.wait_for(lambda: (c.latest_schedule() or (-np.inf,))[0] >= t_s - 1e-3,
-                       max(0.0, self.timeout_s - (time.perf_counter() - t0)))
+                       self.timeout_s)
         names = {0: Level.OK, 1: Level.WARN, 2: Level.ERROR}
-        return names.get(level, f"ERROR {text}"), time.perf_counter() - t0
+        return Reason(rid_self.split("-")[1]), names.get(level, f"ERROR {text}"), lat
+
+    def _thrust_for(self, t_s) -> bool:
+        with self.client.cond:
+            recent = [m for _, m in self.client.thrust[-5:]]
+        return any(abs(self._stamp_s(m.header.stamp) - t_s) < 1e-6 for m in recent)
+
+    def _self_replan(self, t_s, after: int):
+        """(request id, (level, message, values)) of a self-triggered re-plan that started from
+        the estimate at t_s, among the diagnostics from index ``after`` on."""
+        from .client import status_of
+        for _, m in self.client.diags[after:]:
+            for st in m.status:
+                level, text, vals = status_of(st)
+                rid = vals.get("request_id", "")
+                if rid.startswith("self-") and abs(float(vals.get("state_stamp_s", "nan"))
+                                                    - t_s) < 1e-6:
+                    return rid, (level, text, vals)
+        return None
 
     def thrust_at(self, t_s, pos, vel, mass):
         sched = self.client.latest_schedule()
@@ -105,100 +152,62 @@ class RosLink:
         self.client.close()
 
 
-def flight_steps(t0_s: float, N: int, dt_stage: float, substeps: int, replan_every: int,
-                 final_stages: int, final_substeps: int, final_min_step: float):
-    """The closed loop's time grid: (start s, end s, re-optimise at the start?) per step.
+def flight_steps(t0_s: float, N: int, dt_stage: float, substeps: int, final_stages: int,
+                 final_substeps: int, final_min_step: float):
+    """The closed loop's time grid, the times of its estimates: (start s, end s) per step.
 
-    Stages are flown in ``substeps`` steps with a re-optimisation every ``replan_every`` stages;
-    the last ``final_stages`` in steps of a stage / ``final_substeps``, each preceded by a
-    re-optimisation, and the remaining time is halved from there on down to
-    ``final_min_step`` (a fraction of a stage): execution errors after the last
-    re-optimisation cannot be corrected, so the last open-loop interval must be short.
+    Stages are flown in ``substeps`` steps; the last ``final_stages`` in steps of a stage /
+    ``final_substeps``, and the remaining time is halved from there on down to
+    ``final_min_step`` (a fraction of a stage): the arrival phase, where the node re-plans at
+    every estimate (``self_trigger``), so the last open-loop interval is short.
     """
     for stage in range(N - final_stages):
         for i in range(substeps):
             yield (t0_s + (stage + i / substeps) * dt_stage,
-                   t0_s + (stage + (i + 1) / substeps) * dt_stage,
-                   i == 0 and stage > 0 and stage % replan_every == 0)
+                   t0_s + (stage + (i + 1) / substeps) * dt_stage)
     t, t_end = t0_s + (N - final_stages) * dt_stage, t0_s + N * dt_stage
     fine, shortest = dt_stage / final_substeps, final_min_step * dt_stage
     while t_end - t > shortest * (1 + 1e-9):
         rem = t_end - t
         step = fine if rem > 2 * fine * (1 + 1e-9) else rem / 2
-        yield t, t + step, True
+        yield t, t + step
         t += step
-    yield t, t_end, False
+    yield t, t_end
 
 
-class DeviationMonitor:
-    """The loop's prediction of where the schedule in force takes the spacecraft: reset to the
-    estimate at each re-optimisation, then propagated with the commanded thrust (no errors) in
-    step with the truth. A re-optimisation is due when the estimate has drifted from it by more
-    than ``max_pos_m`` or ``max_vel_m_s`` (0 disables that test)."""
-
-    def __init__(self, sim: TruthSim, max_pos_m: float, max_vel_m_s: float):
-        self.sim, self.max_pos_m, self.max_vel_m_s = sim, max_pos_m, max_vel_m_s
-        self.x = None   # normalised predicted state
-
-    def reset(self, pos, vel, mass) -> None:
-        self.x = self.sim.units.states_normalised(np.concatenate([pos, vel, [mass]]))
-
-    def advance(self, thrust_n, dt_s: float) -> None:
-        if self.x is not None:
-            self.x = self.sim.propagate(self.x, thrust_n, dt_s)
-
-    def drift(self, pos, vel) -> tuple[float, float]:
-        """(position m, velocity m/s) of the estimate from the prediction."""
-        x = self.sim.units.states_si(self.x)
-        return float(np.linalg.norm(pos - x[:3])), float(np.linalg.norm(vel - x[3:6]))
-
-    def due(self, pos, vel) -> bool:
-        if self.x is None or not (self.max_pos_m or self.max_vel_m_s):
-            return False
-        dr, dv = self.drift(pos, vel)
-        return bool((self.max_pos_m and dr > self.max_pos_m)
-                    or (self.max_vel_m_s and dv > self.max_vel_m_s))
-
-
-def fly(link, sim: TruthSim, planner: GuidancePlanner, replan_every: int, substeps: int,
-        final_stages: int, final_substeps: int = 0, final_min_step: float = 1 / 64,
-        progress=None, trigger_pos_m: float = 0.0, trigger_vel_m_s: float = 0.0) -> dict:
-    """Run the closed loop to the end of the transfer (time grid: ``flight_steps``); the
-    schedule is flown piecewise constant between its stage starts. Besides the grid's
-    re-optimisations, one is asked for at any step whose estimate has drifted from the loop's
-    prediction by more than ``trigger_pos_m`` / ``trigger_vel_m_s`` (``DeviationMonitor``).
-    Returns the run's figures, the flown positions at the grid's times (``flown_m``, (K, 3) m)
-    and the thrust actually applied (``thrust_log``: (t_s, |thrust| N) from each piece on)."""
+def fly(link, sim: TruthSim, planner: GuidancePlanner, policy: TriggerConfig, substeps: int,
+        final_substeps: int = 0, progress=None) -> dict:
+    """Run the closed loop to the end of the transfer: an estimate to ``link`` at each step of
+    ``flight_steps`` (its arrival phase from ``policy``), which re-plans where ``policy`` says
+    (in the node, or in-process for a ``DirectLink``); the schedule is flown piecewise constant
+    between its stage starts. Returns the run's figures, the flown positions at the grid's
+    times (``flown_m``, (K, 3) m) and the thrust actually applied (``thrust_log``: (t_s,
+    |thrust| N) from each piece on)."""
     N = planner.base_problem.N
     dt_stage = sim.tof_s / N
     latencies, levels, flown, thrust_log = [], [], [sim.truth_si()[0]], []
-    monitor = DeviationMonitor(sim, trigger_pos_m, trigger_vel_m_s)
-    monitor.reset(*sim.estimate_si())
     triggered = 0
-    for j, (t0, t1, replan) in enumerate(flight_steps(
-            sim.t_s, N, dt_stage, substeps, replan_every, final_stages,
-            final_substeps or substeps, final_min_step)):
+    link.estimate(*sim.estimate_si(), sim.t_s, "start")   # starts the policy's prediction
+    for j, (t0, t1) in enumerate(flight_steps(
+            sim.t_s, N, dt_stage, substeps, policy.arrival_stages,
+            final_substeps or substeps, policy.arrival_min_step)):
         pos, vel, mass = sim.estimate_si()
-        if not replan and monitor.due(pos, vel):
-            replan, triggered = True, triggered + 1
-        if replan:
-            level, lat = link.replan(pos, vel, mass, t0, f"r{j}")
+        out = link.estimate(pos, vel, mass, t0, f"r{j}")
+        if out is not None:
+            reason, level, lat = out
             latencies.append(lat)
             levels.append(level)
-            monitor.reset(pos, vel, mass)
+            triggered += reason == Reason.DRIFT
             if progress:
                 progress(f"  t = {(t0 - sim.t0_s) / 86400:7.3f} d  stage "
                          f"{int((t0 - sim.t0_s) / dt_stage + 1e-9):3d}/{N}  replan {level:5s} "
-                         f"{lat * 1e3:8.1f} ms")
-        elif isinstance(link, RosLink):
-            link.publish_estimate(pos, vel, mass, t0)
+                         f"{lat * 1e3:8.1f} ms  ({reason})")
         starts = link.stage_starts()
         cuts = [t0, *starts[(starts > t0 + 1e-6) & (starts < t1 - 1e-6)], t1]
         for a, b in zip(cuts[:-1], cuts[1:]):
             thrust = link.thrust_at(a, pos, vel, mass)
             applied = sim.apply(thrust, b - a)
             thrust_log.append((a, float(np.linalg.norm(applied))))
-            monitor.advance(thrust, b - a)
         flown.append(sim.truth_si()[0])
     miss_r, miss_v = sim.miss()
     m_final = sim.truth_si()[2]
@@ -250,21 +259,23 @@ def main(argv=None) -> int:
     ap.add_argument("--seed", type=int, default=1)
     ap.add_argument("--jobs", type=int, default=os.cpu_count() or 1,
                     help="Monte Carlo runs in parallel worker processes (default: one per core)")
-    ap.add_argument("--replan-every", type=int, default=1,
-                    help="stages between re-optimisations (0: every 5 %% of the stages)")
+    policy = TriggerConfig()   # the node's defaults
+    ap.add_argument("--replan-every", type=int, default=policy.replan_every_stages,
+                    help="stages between the node's re-optimisations (0: every 5 %% of the "
+                         "stages; node parameter replan_every_stages)")
     ap.add_argument("--substeps", type=int, default=2, help="simulation steps per stage")
-    ap.add_argument("--final-stages", type=int, default=2,
-                    help="re-optimise at every sub-step of the last stages")
+    ap.add_argument("--final-stages", type=int, default=policy.arrival_stages,
+                    help="the arrival phase, where every estimate re-plans (arrival_stages)")
     ap.add_argument("--final-substeps", type=int, default=8,
-                    help="simulation steps (and re-optimisations) per stage in the last stages")
-    ap.add_argument("--final-min-step", type=float, default=1 / 256,
+                    help="simulation steps (estimates) per stage in the arrival phase")
+    ap.add_argument("--final-min-step", type=float, default=policy.arrival_min_step,
                     help="shortest final step (fraction of a stage): the remaining time is "
-                         "halved at each re-optimisation down to it")
-    ap.add_argument("--trigger-km", type=float, default=5.0,
-                    help="also re-optimise when the estimate drifts this far from the loop's "
-                         "prediction (0: off)")
-    ap.add_argument("--trigger-cm-s", type=float, default=5.0,
-                    help="also re-optimise when the estimated velocity drifts this far (0: off)")
+                         "halved at each estimate down to it (arrival_min_step)")
+    ap.add_argument("--trigger-km", type=float, default=policy.trigger_position_m / 1e3,
+                    help="the node also re-plans when the estimate drifts this far from its "
+                         "prediction (0: off; trigger_position_m)")
+    ap.add_argument("--trigger-cm-s", type=float, default=policy.trigger_velocity_m_s * 100,
+                    help="... or this fast (0: off; trigger_velocity_m_s)")
     ap.add_argument("--arrival-tolerance-km", type=float, default=0.3,
                     help="in the arrival phase the guidance targets the velocity exactly and the "
                          "position within this distance (node parameter arrival_tolerance_m)")
@@ -303,18 +314,21 @@ def _monte_carlo_run(job) -> dict:
     args, errors, seed = job
     pl, _ = nominal_planner(args.case, args.time_budget, args.arrival_tolerance_km * 1e3)
     sim = TruthSim(args.case, errors, seed=seed, t0_s=T0_S)
-    r = fly(DirectLink(pl), sim, pl, **_loop_settings(args))
+    settings = _loop_settings(args)
+    r = fly(DirectLink(pl, settings["policy"]), sim, pl, **settings)
     r.pop("flown_m")
     r.pop("thrust_log")
     return r
 
 
 def _loop_settings(args) -> dict:
-    """fly()'s time grid and re-optimisation triggers from the command line."""
-    return {"replan_every": args.replan_every, "substeps": args.substeps,
-            "final_stages": args.final_stages, "final_substeps": args.final_substeps,
-            "final_min_step": args.final_min_step, "trigger_pos_m": args.trigger_km * 1e3,
-            "trigger_vel_m_s": args.trigger_cm_s / 100}
+    """fly()'s time grid and the node's re-plan policy from the command line."""
+    policy = TriggerConfig(replan_every_stages=args.replan_every,
+                           trigger_position_m=args.trigger_km * 1e3,
+                           trigger_velocity_m_s=args.trigger_cm_s / 100,
+                           arrival_stages=args.final_stages,
+                           arrival_min_step=args.final_min_step)
+    return {"policy": policy, "substeps": args.substeps, "final_substeps": args.final_substeps}
 
 
 def _ros_demo(args, planner, errors, m_open, m0) -> int:
@@ -324,8 +338,10 @@ def _ros_demo(args, planner, errors, m_open, m0) -> int:
     from .guidance_node import GuidanceNode
     from .spin import SpinThread
     rclpy.init(signal_handler_options=SignalHandlerOptions.NO)
+    settings = _loop_settings(args)
     guidance = GuidanceNode(scenario=args.case, time_budget_s=args.time_budget,
-                            arrival_tolerance_m=args.arrival_tolerance_km * 1e3)
+                            arrival_tolerance_m=args.arrival_tolerance_km * 1e3,
+                            **asdict(settings["policy"]))
     recorder = None
     if args.record:   # before anything is published: the recorder sees the whole run
         from .recording import McapRecorder
@@ -339,7 +355,7 @@ def _ros_demo(args, planner, errors, m_open, m0) -> int:
             return 1
         sim = TruthSim(args.case, errors, seed=args.seed, t0_s=T0_S)
         r = fly(link, sim, guidance.planner, progress=lambda s: print(s, flush=True),
-                **_loop_settings(args))
+                **settings)
     finally:
         if recorder is not None:
             counts = recorder.close()

@@ -39,10 +39,11 @@ from daddy_core.errors import DaddyError
 
 from . import conversions as cv
 from .checks import InputRejected
-from .config import NodeConfig, PlannerConfig, bundled_plan, parameters
+from .config import NodeConfig, PlannerConfig, TriggerConfig, bundled_plan, parameters
 from .plan import Code, Level
 from .planner import GuidancePlanner
 from .request_queue import RequestQueue
+from .self_trigger import ReplanTrigger
 from .spin import SpinThread, spin_guarded
 
 NODE_NAME = "daddy_guidance"
@@ -118,6 +119,9 @@ class GuidanceNode(LifecycleNode):
         self._replan_on_first_estimate = False
         self._configure_error = ""
         self._configured = False
+        self.trigger: ReplanTrigger | None = None   # made at configure (self_replan)
+        self._withheld: list[float] = []   # estimate stamps whose thrust waits for a re-plan
+        self._withheld_lock = threading.Lock()
         g = lambda n: self.get_parameter(n).value  # noqa: E731
         # outputs exist in every state: diagnostics always, the plan latched across deactivation,
         # thrust commands only while active (a lifecycle publisher)
@@ -165,6 +169,11 @@ class GuidanceNode(LifecycleNode):
                        {"field": "parameters"}, None)
             return TransitionCallbackReturn.FAILURE
         cfg = NodeConfig(**{f: g(f) for f in NodeConfig.__dataclass_fields__})
+        policy = TriggerConfig(**{f: g(f) for f in TriggerConfig.__dataclass_fields__})
+        base = self.planner.base_problem
+        self.trigger = ReplanTrigger(self.planner.case, policy,
+                                     float(self.planner.units.time_s(base.stage_dt[0])),
+                                     base.N) if policy.self_replan else None
         self.frame_id = cfg.frame_id
         self.plan_file = cfg.plan_file or self._bundled_plan()
         self.persist_file = cfg.persist_file
@@ -281,9 +290,25 @@ class GuidanceNode(LifecycleNode):
             return
         self.queue.add_state(est.pos_m, est.vel_m_s, stamp, est.pos_sigma_m, est.vel_sigma_m_s)
         plan = self.planner.plan or self._adopt_nominal()
+        if plan is not None and self._self_triggered(est, stamp, plan):
+            return   # its thrust command follows the re-plan it triggered (_finish)
         if plan is not None:
             self.pub_thrust.publish(cv.thrust_command(plan.thrust_at(stamp), stamp, self.frame_id))
         self._maybe_replan_after_restart()
+
+    def _self_triggered(self, est, stamp: float, plan) -> bool:
+        """Ask the re-plan policy (``self_trigger``) about an accepted estimate; when a re-plan
+        is due, queue it and withhold the estimate's thrust command until it has finished."""
+        mass = self.queue.mass_for(stamp)
+        if self.trigger is None or mass is None:
+            return False
+        reason = self.trigger.observe(stamp, est.pos_m, est.vel_m_s, mass, plan)
+        if reason is None:
+            return False
+        with self._withheld_lock:
+            self._withheld.append(stamp)
+        self.queue.enqueue(f"self-{reason}-{stamp:.3f}", stamp)
+        return True
 
     def _on_mass(self, msg: InertiaStamped):
         if not self._active:
@@ -400,6 +425,8 @@ class GuidanceNode(LifecycleNode):
                          "no valid state_estimate and mass_estimate yet", now, started)
             return
         pos, vel, stamp = state.pos_m, state.vel_m_s, state.stamp_s
+        if self.trigger is not None:   # the prediction restarts from the estimate solved from
+            self.trigger.replanned(stamp, pos, vel, mass)
         started["state_stamp_s"] = f"{stamp:.9f}"
         for key, sigma in (("state_position_sigma_m", state.pos_sigma_m),
                            ("state_velocity_sigma_m_s", state.vel_sigma_m_s)):
@@ -476,7 +503,18 @@ class GuidanceNode(LifecycleNode):
         self._diag(level, code, reason, values, stamp)
         self._last_solve = (level, reason, out.solve_time_s if out is not None else None,
                             time.time())
+        self._release_withheld(plan)
         self.queue.record(level, reason, bool(out is not None and out.ok))
+
+    def _release_withheld(self, plan) -> None:
+        """The thrust commands withheld for the estimates that triggered this re-plan (or were
+        coalesced into it), from the plan now in force; none while inactive."""
+        with self._withheld_lock:
+            stamps, self._withheld = self._withheld, []
+        if plan is None or not self._active:
+            return
+        for s in stamps:
+            self.pub_thrust.publish(cv.thrust_command(plan.thrust_at(s), s, self.frame_id))
 
     def adopt_plan(self, plan) -> None:
         """Make ``plan`` the current plan and publish it (e.g. a nominal computed elsewhere)."""

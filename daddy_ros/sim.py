@@ -8,7 +8,8 @@ from dataclasses import dataclass
 import numpy as np
 
 from daddy_core.catalogue import load_case
-from daddy_core.integrators import rk78
+
+from .self_trigger import propagate
 
 T0_S = 1000.0  # the demo's mission clock at departure [s]; any positive epoch works
 
@@ -74,8 +75,7 @@ class TruthSim:
 
     def propagate(self, x: np.ndarray, thrust_n: np.ndarray, dt_s: float) -> np.ndarray:
         """The true dynamics without errors: normalised state x after dt_s under thrust_n [N]."""
-        return rk78(self.rhs, x, self.units.thrust(np.asarray(thrust_n, float)), 0.0,
-                    float(self.units.time(dt_s)), tol=1e-12)
+        return propagate(self.case, x, thrust_n, dt_s)
 
     def miss(self):
         """(position miss m, velocity miss m/s) with respect to the case target."""

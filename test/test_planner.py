@@ -7,9 +7,10 @@ import pytest
 
 from daddy_core.errors import DaddyError
 from daddy_ros.checks import InputRejected
-from daddy_ros.config import PLANS_DIR
-from daddy_ros.demo import DeviationMonitor, flight_steps
+from daddy_ros.config import PLANS_DIR, TriggerConfig
+from daddy_ros.demo import flight_steps
 from daddy_ros.planner import GuidancePlanner
+from daddy_ros.self_trigger import Reason, ReplanTrigger
 from daddy_ros.shift import ARRIVAL_SPEED_SCALE_M_S, MIN_STAGE_FRACTION, MIN_STAGES_LEFT
 from daddy_ros.sim import T0_S, Errors, TruthSim
 
@@ -103,35 +104,60 @@ def test_arrival_phase_targets_velocity_and_a_position_ball():
         GuidancePlanner("earth_mars", arrival_tolerance_m=-1.0)
 
 
-def test_deviation_monitor_follows_the_truth_and_flags_drift():
+def _trigger(policy=None):
+    """The node's re-plan policy on the bundled Earth-Mars nominal (40 stages of 8.7 days)."""
+    pl = GuidancePlanner("earth_mars")
+    pl.load_plan(PLANS_DIR / "earth_mars_fuel.json", T0_S)
+    base = pl.base_problem
+    stage_s = float(pl.units.time_s(base.stage_dt[0]))
+    return pl, ReplanTrigger(pl.case, policy or TriggerConfig(), stage_s, base.N), stage_s
+
+
+def test_self_trigger_predicts_the_flight_and_flags_drift():
+    """Without errors the prediction follows the truth flown with the plan's thrust (no drift,
+    no re-plan inside a stage); an estimate 6 km or 6 cm/s off re-plans (DRIFT), and the
+    prediction restarts from the estimate a re-plan starts from."""
+    pl, trig, stage_s = _trigger()
     sim = TruthSim("earth_mars", Errors(0, 0, 0, 0), t0_s=T0_S)
-    mon = DeviationMonitor(sim, max_pos_m=2e3, max_vel_m_s=1e-2)
-    assert not mon.due(*sim.truth_si()[:2])          # no prediction yet: nothing is due
-    mon.reset(*sim.truth_si())
-    thrust = np.array([0.1, -0.2, 0.05])
-    for _ in range(3):                                 # without errors it predicts the truth
-        sim.apply(thrust, 86400.0)
-        mon.advance(thrust, 86400.0)
-    pos, vel, _ = sim.truth_si()
-    dr, dv = mon.drift(pos, vel)
-    assert dr < 1.0 and dv < 1e-6
-    assert not mon.due(pos, vel)
-    assert mon.due(pos + [3e3, 0, 0], vel)             # drifted by more than 2 km
-    assert mon.due(pos, vel + [0, 0, 0.02])            # or by more than 1 cm/s
-    off = DeviationMonitor(sim, 0.0, 0.0)
-    off.reset(pos, vel, 900.0)
-    assert not off.due(pos + 1e9, vel + 1e3)                 # both tests off
+    plan = pl.plan
+    assert trig.observe(sim.t_s, *sim.truth_si(), plan) is None    # starts the prediction
+    for _ in range(3):                         # a third of the first stage, the truth flown
+        dt = stage_s / 4
+        sim.apply(plan.thrust_at(sim.t_s), dt)
+        pos, vel, mass = sim.truth_si()
+        assert trig.observe(sim.t_s, pos, vel, mass, plan) is None
+    assert trig.observe(sim.t_s, pos + [6e3, 0, 0], vel, mass, plan) is Reason.DRIFT
+    assert trig.observe(sim.t_s, pos, vel + [0, 0.06, 0], mass, plan) is Reason.DRIFT
+    trig.replanned(sim.t_s, pos + [6e3, 0, 0], vel, mass)
+    assert trig.observe(sim.t_s, pos + [6e3, 0, 0], vel, mass, plan) is None
+    off = ReplanTrigger(pl.case, TriggerConfig(trigger_position_m=0.0, trigger_velocity_m_s=0.0,
+                                               replan_every_stages=0, arrival_stages=0),
+                        stage_s, pl.base_problem.N)
+    assert off.observe(T0_S, pos, vel, mass, plan) is None
+    assert off.observe(T0_S + 1.0, pos + 1e9, vel + 1e3, mass, plan) is None   # all off
 
 
-def test_flight_steps_cover_the_transfer_and_shrink_to_the_end():
-    steps = list(flight_steps(0.0, 10, 1.0, 2, 2, 2, 8, 1 / 64))
-    starts, ends, replan = (np.array(v) for v in zip(*steps))
-    np.testing.assert_allclose(starts[1:], ends[:-1])             # contiguous
-    assert starts[0] == 0.0 and ends[-1] == pytest.approx(10.0)
-    assert not replan[-1] and ends[-1] - starts[-1] == pytest.approx(1 / 64)
-    assert replan[starts >= 8.0][:-1].all()                       # every final step re-plans
-    periodic = starts[replan & (starts < 8.0)]
-    np.testing.assert_allclose(periodic, [2.0, 4.0, 6.0])
+def test_self_trigger_stage_boundaries_and_arrival_phase_on_the_demo_grid():
+    """On the closed loop's grid (flight_steps) the policy re-plans at every replan_every-th
+    stage start before the arrival phase and at every arrival estimate but the last; with
+    drift off nothing else."""
+    pl, trig, stage_s = _trigger(TriggerConfig(replan_every_stages=5, trigger_position_m=0.0,
+                                               trigger_velocity_m_s=0.0, arrival_stages=2,
+                                               arrival_min_step=1 / 64))
+    N, plan = pl.base_problem.N, pl.plan
+    pos, vel, mass = TruthSim("earth_mars", t0_s=T0_S).truth_si()
+    steps = list(flight_steps(T0_S, N, stage_s, 2, 2, 8, 1 / 64))
+    starts, ends = (np.array(v) for v in zip(*steps))
+    np.testing.assert_allclose(starts[1:], ends[:-1])                   # contiguous
+    assert ends[-1] == pytest.approx(T0_S + N * stage_s)
+    assert ends[-1] - starts[-1] == pytest.approx(stage_s / 64)
+    reasons = [trig.observe(t, pos, vel, mass, plan) for t in starts]
+    stage_at = [round((t - T0_S) / stage_s, 6) for t, r in zip(starts, reasons)
+                if r is Reason.STAGE]
+    assert stage_at == [5.0 * k for k in range(1, 8)]                  # 5, 10, ..., 35
+    arrival = [r is Reason.ARRIVAL for t, r in zip(starts, reasons) if t >= T0_S + 38 * stage_s]
+    assert all(arrival[:-1]) and not arrival[-1]     # the last open-loop step does not re-plan
+    assert reasons.count(None) == len(reasons) - len(stage_at) - sum(arrival)
 
 
 def test_replan_gives_up_the_thrust_margin_only_as_far_as_needed():

@@ -27,7 +27,10 @@ T0 = 1000.0
 @pytest.fixture(scope="module")
 def graph():
     rclpy.init()
-    node = GuidanceNode(scenario="earth_mars", frame_id=FRAME, time_budget_s=60.0)
+    # request-driven: the tests below send perturbed estimates and expect the plan to change
+    # only on their requests (the node's own policy has its test)
+    node = GuidanceNode(scenario="earth_mars", frame_id=FRAME, time_budget_s=60.0,
+                        self_replan=False)
     client = GuidanceClient(FRAME, name="daddy_test_client")
     ex = MultiThreadedExecutor(num_threads=4)   # the node hosts its Trigger service itself
     ex.add_node(node)
@@ -413,3 +416,53 @@ def test_recording_writes_every_topic_and_a_schedule_round_trips(graph, tmp_path
     assert list(last_schedule.joint_names) == ["thrust_x", "thrust_y", "thrust_z"]
     rec_u = np.array([list(p.effort) for p in last_schedule.points])
     np.testing.assert_array_equal(rec_u, u)
+
+
+def test_node_replans_by_itself_on_drift_and_answers_the_estimate_after_it(graph):
+    """The node's own policy over rclpy (/self namespace, defaults): an estimate 20 km off its
+    prediction of the schedule in force triggers a re-plan (request_id self-drift-...) that
+    starts from that estimate, and the estimate's thrust command comes after that re-plan's
+    diagnostic, from the new plan; an estimate on the prediction triggers nothing."""
+    from daddy_ros.spin import SpinThread
+    node = GuidanceNode(namespace="/self", scenario="earth_mars", frame_id=FRAME,
+                        time_budget_s=60.0)
+    spin = SpinThread(node)
+    c = GuidanceClient(FRAME, name="daddy_self_client", namespace="/self")
+    try:
+        pos, vel, mass = truth_at_start()
+        end = time.monotonic() + 15
+        while time.monotonic() < end and not c.schedules:   # the nominal, at the first estimate
+            c.publish_estimate(pos, vel, mass, T0)
+            c.wait_for(lambda: c.schedules, 0.3)
+        assert c.schedules
+        t1 = T0 + 600.0   # ten minutes on, on the prediction (the plan's thrust, no errors)
+        sim = TruthSim("earth_mars", t0_s=T0)
+        sim.apply(node.planner.plan.thrust_at(T0), 600.0)
+        p1, v1, m1 = sim.truth_si()
+        c.publish_estimate(p1, v1, m1, t1)
+        assert c.wait_for(lambda: [m for _, m in c.thrust
+                                   if abs(cv.stamp_to_s(m.header.stamp) - t1) < 1e-6], 15)
+        t2 = t1 + 600.0
+        n0 = len(c.diags)
+        c.publish_estimate(p1 + [2e4, 0, 0], v1, m1, t2)
+        got = c.wait_for(lambda: [m for _, m in c.thrust
+                                  if abs(cv.stamp_to_s(m.header.stamp) - t2) < 1e-6], 60)
+        assert got, "no thrust command for the drifted estimate"
+        thrust_arrival = next(tt for tt, m in c.thrust
+                              if abs(cv.stamp_to_s(m.header.stamp) - t2) < 1e-6)
+        selfs = [(tt, st) for tt, m in c.diags[n0:] for st in m.status
+                 if any(kv.key == "request_id" and kv.value.startswith("self-drift-")
+                        for kv in st.values)]
+        assert len(selfs) == 1, [st.message for _, st in selfs]
+        tt, st = selfs[0]
+        vals = {kv.key: kv.value for kv in st.values}
+        assert float(vals["state_stamp_s"]) == pytest.approx(t2, abs=1e-6)
+        assert tt <= thrust_arrival   # the command was withheld until the re-plan had finished
+        assert node.planner.plan.epoch_s == pytest.approx(t2)
+        assert not [st for _, m in c.diags[:n0] for st in m.status
+                    if "self-" in str(st.values)]   # nothing on the undisturbed estimate
+    finally:
+        c.close()
+        spin.shutdown()
+        node.stop()
+        node.destroy_node()

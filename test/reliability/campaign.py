@@ -20,7 +20,7 @@ import sys
 import tempfile
 import threading
 import time
-from dataclasses import dataclass, field, replace
+from dataclasses import asdict, dataclass, field, replace
 from pathlib import Path
 
 import numpy as np
@@ -36,6 +36,7 @@ T0_S = 1000.0   # the mission clock at departure [s] (daddy_ros.sim.T0_S, the de
 DELIVERY_S = ESTIMATE_WAIT_S
 MAX_SUPERSEDED = 0.05   # share of new schedules a subscriber may miss under load (latched depth 1)
 REPLY_TIMEOUT_S = 5.0   # one bad input must be diagnosed within this
+PAUSE_STEPS = 10        # estimates the node is kept inactive for (process faults)
 
 
 @dataclass
@@ -649,6 +650,7 @@ def process_faults(sizes: Sizes, workdir: Path, progress=None) -> list[Row]:
     from lifecycle_msgs.msg import Transition
     from lifecycle_msgs.srv import ChangeState
 
+    from daddy_ros.config import TriggerConfig
     from daddy_ros.demo import RosLink, fly
     from daddy_ros.sim import Errors, TruthSim
 
@@ -658,54 +660,62 @@ def process_faults(sizes: Sizes, workdir: Path, progress=None) -> list[Row]:
     persist.unlink(missing_ok=True)
     m_open = float(planner.plan.states_si[-1, 6])
 
+    # the node's own re-plan policy: every 5 stages and the arrival phase, no drift test (the
+    # simulation has no errors), as the demo's client asked for before the node decided itself
+    policy = TriggerConfig(replan_every_stages=5, trigger_position_m=0.0,
+                           trigger_velocity_m_s=0.0, arrival_stages=2, arrival_min_step=1 / 64)
+    params = {"persist_file": str(persist), **asdict(policy)}
+
     def session():
-        node = NodeProcess(workdir, persist_file=str(persist)).start()
+        node = NodeProcess(workdir, **params).start()
         link = RosLink(FRAME, timeout_s=120.0)
         c = link.client
         sim = TruthSim(SCENARIO, Errors(0, 0, 0, 0), t0_s=T0_S)
         count = {"replans": 0, "kills": 0}
         kill_at = {2 + 2 * k for k in range(sizes.kills)}
-        pause_at = max(kill_at) + 2       # deactivated for this re-plan, activated at the next
+        pause_at = max(kill_at) + 2       # deactivated after this re-plan for PAUSE_STEPS steps
         inactive = {"stamps": [], "on": False, "refused": None}
-        inner, publish = link.replan, link.publish_estimate
+        inner, publish = link.estimate, link.publish_estimate
 
         def change(tid):
             resp, _ = c.call(c.change_state, ChangeState.Request(
                 transition=Transition(id=tid)), 30.0)
             return resp is not None and resp.success
 
-        def publish_estimate(pos, vel, mass, t_s):
-            if inactive["on"]:
-                inactive["stamps"].append(t_s)
-            publish(pos, vel, mass, t_s)
-
-        def replan(pos, vel, mass, t_s, rid):
+        def estimate(pos, vel, mass, t_s, rid):
             nonlocal node
+            if inactive["on"]:   # no thrust command will come: fly the latched schedule on
+                inactive["stamps"].append(t_s)
+                publish(pos, vel, mass, t_s)
+                if len(inactive["stamps"]) >= PAUSE_STEPS:
+                    inactive["on"] = False
+                    row.check(change(Transition.TRANSITION_ACTIVATE), "activate refused")
+                return None
+            out = inner(pos, vel, mass, t_s, rid)
+            if out is None:
+                return None
             count["replans"] += 1
-            if count["replans"] == pause_at:
-                row.check(change(Transition.TRANSITION_DEACTIVATE), "deactivate refused")
-                inactive["on"] = True
-                level, lat = inner(pos, vel, mass, t_s, rid)
-                inactive["refused"] = level
-                return level, lat
-            if count["replans"] == pause_at + 1:
-                inactive["on"] = False
-                row.check(change(Transition.TRANSITION_ACTIVATE), "activate refused")
             if count["replans"] in kill_at:
                 t0 = time.time()
                 node.kill()
                 with c.cond:
                     n_sched = len(c.schedules)
-                node = NodeProcess(workdir, persist_file=str(persist)).start()
+                node = NodeProcess(workdir, **params).start()
                 # the restarted node publishes the restored plan (latched) once discovered
                 back = c.wait_for(lambda: len(c.schedules) > n_sched, 60.0)
                 count["kills"] += 1
                 row.check(bool(back) and node.alive(), "restarted node published no plan",
                           time.time() - t0)
-            return inner(pos, vel, mass, t_s, rid)
+            elif count["replans"] == pause_at:
+                row.check(change(Transition.TRANSITION_DEACTIVATE), "deactivate refused")
+                inactive["on"] = True
+                n0 = len(c.diags)
+                c.request("while-inactive", t_s)
+                got = c.wait_for(lambda: c.diag_for("while-inactive", n0), REPLY_TIMEOUT_S)
+                inactive["refused"] = got and got[2].get("code")
+            return out
 
-        link.replan = replan
-        link.publish_estimate = publish_estimate
+        link.estimate = estimate
         try:
             # the node adopts its nominal at the first estimate: publish until it is latched
             end = time.monotonic() + 30.0
@@ -713,8 +723,7 @@ def process_faults(sizes: Sizes, workdir: Path, progress=None) -> list[Row]:
                 link.publish_estimate(*sim.truth_si(), sim.t_s)
             if not link.wait_connected(0.1):
                 raise RuntimeError("guidance node not connected")
-            r = fly(link, sim, planner, replan_every=5, substeps=2, final_stages=2,
-                    progress=progress)
+            r = fly(link, sim, planner, policy, substeps=2, progress=progress)
         finally:
             link.close()
             node.stop()
@@ -724,7 +733,7 @@ def process_faults(sizes: Sizes, workdir: Path, progress=None) -> list[Row]:
         leaked = [s for s in inactive["stamps"] if any(abs(s - x) < 1e-6 for x in thrust_stamps)]
         row.check(bool(inactive["stamps"]) and not leaked,
                   f"thrust_command published while inactive for {leaked or 'no estimate sent'}")
-        row.check(str(inactive["refused"]).startswith("ERROR"),
+        row.check(inactive["refused"] == "NOT_ACTIVE",
                   f"the request while inactive was answered {inactive['refused']}")
         ok = (r["miss_km"] <= 1.0 and r["miss_cm_s"] <= 1.0
               and abs(r["final_mass_kg"] - m_open) <= 0.01 * (planner.case.spacecraft.wet_mass_kg

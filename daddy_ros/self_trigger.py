@@ -1,0 +1,137 @@
+"""When guidance re-plans by itself: the policy that produced the closed-loop Monte Carlo's
+figures, owned by the node (nav2's controller server owns its progress and goal checkers the
+same way). ROS-free and thread-safe; the node asks it on every accepted estimate, the
+in-process Monte Carlo likewise.
+
+A re-plan is due at an estimate (parameters: ``config.TriggerConfig``) when
+- ``STAGE``: it is the first at or after a stage boundary of the transfer's nominal grid
+  (every ``replan_every_stages``-th; the arrival phase has its own rule);
+- ``ARRIVAL``: it lies in the last ``arrival_stages`` nominal stages and more than
+  ``arrival_min_step`` of a stage remains: every estimate there re-plans, so the last
+  open-loop interval -- where execution errors can no longer be corrected -- is as short as the
+  estimates come;
+- ``DRIFT``: it has drifted from the prediction of the schedule in force by more than
+  ``trigger_position_m`` or ``trigger_velocity_m_s``. The prediction is reset to the estimate
+  each re-plan starts from, then propagated with the plan's thrust (the dynamics without
+  errors, RK78), so the drift measures navigation and execution errors, not the plan.
+
+The node withholds the thrust command of an estimate that triggers a re-plan until the re-plan
+has finished (then from the new plan): the command for an estimate reflects what that estimate
+showed, and a simulated loop can wait for it (``demo.RosLink``).
+"""
+from __future__ import annotations
+
+import enum
+import threading
+
+import numpy as np
+
+from daddy_core.catalogue import Case
+from daddy_core.integrators import rk78
+
+from .config import TriggerConfig
+from .plan import Plan
+
+# an estimate this close to a boundary (a stage start, the arrival phase's limits) is on it:
+# the times come from sums of stage durations, equal only to round-off
+TIME_EPS_S = 1e-3
+
+
+class Reason(str, enum.Enum):
+    STAGE = "stage"
+    ARRIVAL = "arrival"
+    DRIFT = "drift"
+
+    __str__ = str.__str__
+
+
+def propagate(case: Case, x: np.ndarray, thrust_n, dt_s: float) -> np.ndarray:
+    """The dynamics without errors: the normalised state x after dt_s under thrust_n [N]."""
+    u = case.units
+    return rk78(case.rhs(), x, u.thrust(np.asarray(thrust_n, float)), 0.0,
+                float(u.time(dt_s)), tol=1e-12)
+
+
+class ReplanTrigger:
+    """The policy for one transfer (module docstring).
+
+    Args:
+        case: the scenario (its dynamics and units).
+        settings: the policy's parameters.
+        stage_s: the nominal stage length [s] (the transfer's N stages of equal length).
+        stages: N.
+    """
+
+    def __init__(self, case: Case, settings: TriggerConfig, stage_s: float, stages: int):
+        self.case, self.settings = case, settings
+        self.stage_s, self.stages = stage_s, stages
+        self._lock = threading.Lock()
+        self._x = None        # predicted normalised state at time self._t
+        self._t = None
+        self._last = None     # time of the last estimate observed
+
+    def observe(self, t_s: float, pos_m, vel_m_s, mass_kg: float,
+                plan: Plan | None) -> Reason | None:
+        """The reason a re-plan is due at this estimate (None: not due). The first estimate
+        with a plan in force only starts the prediction."""
+        with self._lock:
+            last, self._last = self._last, t_s
+            if plan is None:
+                return None
+            if self._x is None:
+                self._reset(t_s, pos_m, vel_m_s, mass_kg)
+                return None
+            self._advance(t_s, plan)
+            end = plan.end_s
+            s = self.settings
+            remaining = end - t_s
+            if (s.arrival_stages and remaining <= s.arrival_stages * self.stage_s + TIME_EPS_S
+                    and remaining > s.arrival_min_step * self.stage_s + TIME_EPS_S):
+                return Reason.ARRIVAL
+            if (s.replan_every_stages and last is not None
+                    and self._boundary_between(last, t_s, end)):
+                return Reason.STAGE
+            if self._drifted(pos_m, vel_m_s):
+                return Reason.DRIFT
+            return None
+
+    def replanned(self, t_s: float, pos_m, vel_m_s, mass_kg: float) -> None:
+        """A re-plan starts from this estimate: the prediction restarts from it."""
+        with self._lock:
+            self._reset(t_s, pos_m, vel_m_s, mass_kg)
+
+    # ------------------------------------------------------------------ internals
+    def _reset(self, t_s, pos_m, vel_m_s, mass_kg):
+        self._x = self.case.units.states_normalised(np.concatenate([pos_m, vel_m_s, [mass_kg]]))
+        self._t = t_s
+
+    def _advance(self, t_s: float, plan: Plan) -> None:
+        """Propagate the prediction to t_s with the plan's thrust, piece by piece between its
+        stage starts."""
+        starts = plan.epoch_s + plan.stage_start_s
+        cuts = [self._t, *starts[(starts > self._t + TIME_EPS_S) & (starts < t_s - TIME_EPS_S)],
+                t_s]
+        for a, b in zip(cuts[:-1], cuts[1:]):
+            if b > a:
+                self._x = propagate(self.case, self._x, plan.thrust_at(a), b - a)
+        self._t = t_s
+
+    def _boundary_between(self, t_prev: float, t_s: float, end_s: float) -> bool:
+        """A nominal boundary k (k % replan_every_stages == 0, before the arrival phase) in
+        (t_prev, t_s]."""
+        origin = end_s - self.stages * self.stage_s
+        k_hi = int(np.floor((t_s - origin + TIME_EPS_S) / self.stage_s))
+        k_lo = int(np.floor((t_prev - origin + TIME_EPS_S) / self.stage_s))
+        last_k = self.stages - max(self.settings.arrival_stages, 0) - 1
+        return any(0 < k <= last_k and k % self.settings.replan_every_stages == 0
+                   for k in range(k_lo + 1, k_hi + 1))
+
+    def _drifted(self, pos_m, vel_m_s) -> bool:
+        s = self.settings
+        if not (s.trigger_position_m or s.trigger_velocity_m_s):
+            return False
+        x = self.case.units.states_si(self._x)
+        dr = float(np.linalg.norm(np.asarray(pos_m) - x[:3]))
+        dv = float(np.linalg.norm(np.asarray(vel_m_s) - x[3:6]))
+        return bool((s.trigger_position_m and dr > s.trigger_position_m)
+                    or (s.trigger_velocity_m_s and dv > s.trigger_velocity_m_s))
