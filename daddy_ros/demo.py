@@ -100,8 +100,8 @@ class RosLink:
         t0 = time.perf_counter()
         self.publish_estimate(pos, vel, mass, t_s)
         if not c.wait_for(lambda: self._thrust_for(t_s), self.timeout_s):
-            return None, f"ERROR no thrust command for the estimate at {t_s:.3f} s", \
-                time.perf_counter() - t0
+            return (None, f"ERROR no thrust command for the estimate at {t_s:.3f} s",
+                    time.perf_counter() - t0)
         lat = time.perf_counter() - t0
         # a withheld command took a solve (>= tens of ms); the re-plan's diagnostic was
         # published before it: allow it a moment to arrive on its own topic

@@ -130,9 +130,7 @@ class GuidanceNode(LifecycleNode):
         self.pub_thrust = self.create_lifecycle_publisher(Vector3Stamped, g("thrust_topic"),
                                                           RELIABLE)
         self.pub_diag = self.create_publisher(DiagnosticArray, "/diagnostics", RELIABLE)
-        period = g("diagnostics_period_s")
-        if not (isinstance(period, float) and math.isfinite(period) and period >= 0.0):
-            raise DaddyError(f"diagnostics_period_s must be a finite float >= 0, got {period!r}")
+        period = g("diagnostics_period_s")   # (its descriptor's range: 0-3600 s)
         if period > 0.0:   # live health: an aggregator never sees the node stale between events
             self.create_timer(period, self._health)
         if g("autostart"):
@@ -244,8 +242,7 @@ class GuidanceNode(LifecycleNode):
         why = next((r for r in map(self._parameter_problem, params) if r), None)
         if why:
             self._diag(Level.WARN, Code.PARAMETER_REJECTED, f"parameter update rejected: {why}",
-                       {"field": "parameters"},
-                       None)
+                       {"field": "parameters"}, None)
             return SetParametersResult(successful=False, reason=why)
         if self._configured:
             self.planner.update(**{p.name: p.value for p in params if p.name in RUNTIME})
@@ -290,9 +287,8 @@ class GuidanceNode(LifecycleNode):
             return
         self.queue.add_state(est.pos_m, est.vel_m_s, stamp, est.pos_sigma_m, est.vel_sigma_m_s)
         plan = self.planner.plan or self._adopt_nominal()
-        if plan is not None and self._self_triggered(est, stamp, plan):
-            return   # its thrust command follows the re-plan it triggered (_finish)
-        if plan is not None:
+        # an estimate that triggers a re-plan gets its thrust command after it (_finish)
+        if plan is not None and not self._self_triggered(est, stamp, plan):
             self.pub_thrust.publish(cv.thrust_command(plan.thrust_at(stamp), stamp, self.frame_id))
         self._maybe_replan_after_restart()
 
@@ -335,8 +331,7 @@ class GuidanceNode(LifecycleNode):
             plan = self.planner.restore_plan(self.persist_file)
         except DaddyError as exc:
             self._diag(Level.ERROR, Code.PLAN_FILE_ERROR, f"persist_file not restored: {exc}",
-                       {"field": "persist_file"},
-                       None)
+                       {"field": "persist_file"}, None)
             return
         self._publish_plan(plan, None)
         self._replan_on_first_estimate = True
@@ -376,9 +371,9 @@ class GuidanceNode(LifecycleNode):
 
     def _on_request(self, msg: Header):
         if not self._active:
-            self._diag(Level.ERROR, Code.NOT_ACTIVE, f"request rejected: the node is "
-                       f"{self.lifecycle_state}, "
-                       "not active", {"request_id": msg.frame_id or "topic"},
+            self._diag(Level.ERROR, Code.NOT_ACTIVE,
+                       f"request rejected: the node is {self.lifecycle_state}, not active",
+                       {"request_id": msg.frame_id or "topic"},
                        cv.stamp_to_s(msg.stamp) or None, log_every_s=1.0)
             return
         self.queue.enqueue(msg.frame_id or "topic", cv.stamp_to_s(msg.stamp))
@@ -522,8 +517,7 @@ class GuidanceNode(LifecycleNode):
         self._publish_plan(plan, plan.epoch_s)
         self._persist()
         self._diag(Level.OK, Code.PLAN_ADOPTED, "adopted a plan",
-                   {"request_id": plan.request_id or "adopted"},
-                   plan.epoch_s)
+                   {"request_id": plan.request_id or "adopted"}, plan.epoch_s)
 
     # ------------------------------------------------------------------ outputs
     def _publish_plan(self, plan, stamp):
