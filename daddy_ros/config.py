@@ -139,7 +139,8 @@ class Parameter:
 
 
 def parameters() -> list[Parameter]:
-    """The node's parameters in declaration order: the planner's, then the node's own."""
+    """The node's parameters in declaration order: the planner's, the re-plan policy's, then
+    the node's own."""
     return [Parameter(f.name, f.default, f.metadata["description"], f.metadata["runtime"],
                       f.metadata["static"], f.metadata["bounds"])
             for cls in (PlannerConfig, TriggerConfig, NodeConfig) for f in fields(cls)
