@@ -117,6 +117,24 @@ class RosLink:
         names = {0: Level.OK, 1: Level.WARN, 2: Level.ERROR}
         return Reason(rid_self.split("-")[1]), names.get(level, f"ERROR {text}"), lat
 
+    def request(self, pos, vel, mass, t_s, rid):
+        """An external re-plan request (``replan_request``) from this estimate; waits for its
+        diagnostic and, when a new plan was stored, for its schedule: (level, latency s)
+        (bench_replan's trigger -> schedule latency)."""
+        c = self.client
+        self.publish_estimate(pos, vel, mass, t_s)
+        time.sleep(0.02)  # let the estimate arrive before the request (same reliable link)
+        t0 = time.perf_counter()
+        n_diags = len(c.diags)
+        c.request(rid, t_s)
+        diag = c.wait_for(lambda: c.diag_for(rid, n_diags), self.timeout_s)
+        level, text, vals = diag or (None, "timeout", {})
+        if vals.get("plan_kept") == "no":
+            c.wait_for(lambda: (c.latest_schedule() or (-np.inf,))[0] >= t_s - 1e-3,
+                       max(0.0, self.timeout_s - (time.perf_counter() - t0)))
+        names = {0: Level.OK, 1: Level.WARN, 2: Level.ERROR}
+        return names.get(level, f"ERROR {text}"), time.perf_counter() - t0
+
     def _thrust_for(self, t_s) -> bool:
         with self.client.cond:
             recent = [m for _, m in self.client.thrust[-5:]]
