@@ -67,7 +67,8 @@ def odometry_to_state(msg: Odometry) -> OdometryState:
     pos = np.array([p.x, p.y, p.z], dtype=float)
     vel = np.array([v.x, v.y, v.z], dtype=float)
     if msg.child_frame_id not in ("", msg.header.frame_id):
-        vel = _rotation(np.array([q.w, q.x, q.y, q.z], dtype=float)) @ vel
+        with np.errstate(invalid="ignore", over="ignore"):   # a non-finite twist: checked next
+            vel = _rotation(np.array([q.w, q.x, q.y, q.z], dtype=float)) @ vel
     return OdometryState(pos, vel, stamp_to_s(msg.header.stamp), msg.header.frame_id,
                          _sigma(msg.pose.covariance, "state_estimate.pose.covariance"),
                          _sigma(msg.twist.covariance, "state_estimate.twist.covariance"))

@@ -650,6 +650,7 @@ def process_faults(sizes: Sizes, workdir: Path, progress=None) -> list[Row]:
     from lifecycle_msgs.msg import Transition
     from lifecycle_msgs.srv import ChangeState
 
+    from daddy_ros import conversions as cv
     from daddy_ros.config import TriggerConfig
     from daddy_ros.demo import RosLink, fly
     from daddy_ros.sim import Errors, TruthSim
@@ -688,6 +689,10 @@ def process_faults(sizes: Sizes, workdir: Path, progress=None) -> list[Row]:
                 inactive["stamps"].append(t_s)
                 publish(pos, vel, mass, t_s)
                 if len(inactive["stamps"]) >= PAUSE_STEPS:
+                    # the inactive node does not answer: give the estimates sent the delivery
+                    # allowance to reach it before it is active again (sent within ms, they
+                    # were otherwise still queued when it woke up, and answered)
+                    time.sleep(DELIVERY_S)
                     inactive["on"] = False
                     row.check(change(Transition.TRANSITION_ACTIVATE), "activate refused")
                 return None
@@ -703,8 +708,17 @@ def process_faults(sizes: Sizes, workdir: Path, progress=None) -> list[Row]:
                 node = NodeProcess(workdir, **params).start()
                 # the restarted node publishes the restored plan (latched) once discovered
                 back = c.wait_for(lambda: len(c.schedules) > n_sched, 60.0)
+                # and takes estimates once its subscription is matched: until it answers one,
+                # an estimate can be lost in discovery (and the loop would wait its timeout)
+                answered = lambda: sum(abs(cv.stamp_to_s(m.header.stamp) - t_s) < 1e-6  # noqa
+                                       for _, m in c.thrust)
+                n_answers, end = answered(), time.monotonic() + 60.0
+                while back and answered() <= n_answers and time.monotonic() < end:
+                    publish(pos, vel, mass, t_s)
+                    c.wait_for(lambda: answered() > n_answers, 0.5)
                 count["kills"] += 1
-                row.check(bool(back) and node.alive(), "restarted node published no plan",
+                row.check(bool(back) and answered() > n_answers and node.alive(),
+                          "restarted node published no plan or answered no estimate",
                           time.time() - t0)
             elif count["replans"] == pause_at:
                 row.check(change(Transition.TRANSITION_DEACTIVATE), "deactivate refused")
@@ -727,7 +741,6 @@ def process_faults(sizes: Sizes, workdir: Path, progress=None) -> list[Row]:
         finally:
             link.close()
             node.stop()
-        from daddy_ros import conversions as cv
         with c.cond:
             thrust_stamps = [cv.stamp_to_s(m.header.stamp) for _, m in c.thrust]
         leaked = [s for s in inactive["stamps"] if any(abs(s - x) < 1e-6 for x in thrust_stamps)]
