@@ -73,8 +73,11 @@ class ReplanTrigger:
     def observe(self, t_s: float, pos_m, vel_m_s, mass_kg: float,
                 plan: Plan | None) -> Reason | None:
         """The reason a re-plan is due at this estimate (None: not due). The first estimate
-        with a plan in force only starts the prediction."""
+        with a plan in force only starts the prediction; one older than the prediction (topics
+        are not ordered: a re-plan may have started from a newer estimate) is not judged."""
         with self._lock:
+            if self._t is not None and t_s < self._t - TIME_EPS_S:
+                return None
             last, self._last = self._last, t_s
             if plan is None:
                 return None

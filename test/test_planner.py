@@ -130,6 +130,9 @@ def test_self_trigger_predicts_the_flight_and_flags_drift():
     assert trig.observe(sim.t_s, pos, vel + [0, 0.06, 0], mass, plan) is Reason.DRIFT
     trig.replanned(sim.t_s, pos + [6e3, 0, 0], vel, mass)
     assert trig.observe(sim.t_s, pos + [6e3, 0, 0], vel, mass, plan) is None
+    # an estimate older than the prediction (out of order) is not judged, nor moves it
+    assert trig.observe(sim.t_s - 3600.0, pos + [9e4, 0, 0], vel, mass, plan) is None
+    assert trig.observe(sim.t_s, pos + [6e3, 0, 0], vel, mass, plan) is None
     off = ReplanTrigger(pl.case, TriggerConfig(trigger_position_m=0.0, trigger_velocity_m_s=0.0,
                                                replan_every_stages=0, arrival_stages=0),
                         stage_s, pl.base_problem.N)
