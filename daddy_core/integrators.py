@@ -234,8 +234,7 @@ class _Arrived:
 
     def __init__(self, x):
         self.full = _wrap(x.c.copy(), x.T) if isinstance(x, DA) else np.array(x)
-        self.B = self.full.shape[-1]
-        self.index = np.arange(self.B)      # where the current batch's elements belong
+        self.index = np.arange(self.full.shape[-1])   # where the current batch's elements belong
 
     def leave(self, x, u, keep: np.ndarray):
         """(x, u) of the elements ``keep`` (indices into the current batch); the others' final
@@ -243,11 +242,9 @@ class _Arrived:
         self._store(x)
         n = self.index.size
         self.index = self.index[keep]
-        take = (lambda v: _wrap(v.c[..., keep], v.T)) if isinstance(x, DA) else (
-            lambda v: v[..., keep])
         if u is not None and len(u.shape) >= 2 and u.shape[-1] == n:
-            u = _wrap(u.c[..., keep], u.T) if isinstance(u, DA) else np.asarray(u)[..., keep]
-        return take(x), u
+            u = _take_batch(u, keep)
+        return _take_batch(x, keep), u
 
     def result(self, x):
         """The whole batch's final states, x the current batch's."""
@@ -259,6 +256,11 @@ class _Arrived:
             self.full.c[..., self.index] = x.c
         else:
             self.full[..., self.index] = x
+
+
+def _take_batch(v, keep: np.ndarray):
+    """The batch elements ``keep`` (last axis) of an array or DA."""
+    return _wrap(v.c[..., keep], v.T) if isinstance(v, DA) else np.asarray(v)[..., keep]
 
 
 def _standard_layout(x):

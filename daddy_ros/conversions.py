@@ -119,9 +119,7 @@ def plan_to_joint_trajectory(plan: Plan, frame_id: str, from_s: float | None = N
     msg = JointTrajectory()
     msg.header = Header(stamp=s_to_stamp(t0), frame_id=frame_id)
     msg.joint_names = list(JOINT_NAMES)
-    starts = plan.epoch_s + plan.stage_start_s
-    ends = starts + plan.stage_dt_s
-    for start, end, u in zip(starts, ends, plan.thrust_n):
+    for start, end, u in zip(plan.start_times_s, plan.end_times_s, plan.thrust_n):
         if end <= t0:
             continue
         pt = JointTrajectoryPoint()

@@ -35,9 +35,7 @@ class DirectLink:
 
     def __init__(self, planner: GuidancePlanner, policy: TriggerConfig):
         self.planner = planner
-        base = planner.base_problem
-        self.trigger = ReplanTrigger(planner.case, policy,
-                                     float(planner.units.time_s(base.stage_dt[0])), base.N)
+        self.trigger = ReplanTrigger.for_planner(planner, policy)
 
     def estimate(self, pos, vel, mass, t_s, rid):
         """An estimate, as the node takes it: (reason, level, latency s) of the re-plan it
@@ -59,8 +57,10 @@ class DirectLink:
 
     def stage_starts(self) -> np.ndarray:
         plan = self.planner.plan
-        return plan.epoch_s + plan.stage_start_s if plan else np.zeros(0)
+        return plan.start_times_s if plan else np.zeros(0)
 
+
+_LEVEL_OF = {0: Level.OK, 1: Level.WARN, 2: Level.ERROR}   # DiagnosticStatus level -> Level
 
 # a thrust command later than this after its estimate was withheld for a re-plan (a solve takes
 # tens of milliseconds at least; an immediate command, ~2 ms: bench/bench_intake.py)
@@ -114,8 +114,7 @@ class RosLink:
         if vals.get("plan_kept") == "no":   # its schedule is stamped with the estimate time
             c.wait_for(lambda: (c.latest_schedule() or (-np.inf,))[0] >= t_s - 1e-3,
                        self.timeout_s)
-        names = {0: Level.OK, 1: Level.WARN, 2: Level.ERROR}
-        return Reason(rid_self.split("-")[1]), names.get(level, f"ERROR {text}"), lat
+        return Reason(rid_self.split("-")[1]), _LEVEL_OF.get(level, f"ERROR {text}"), lat
 
     def request(self, pos, vel, mass, t_s, rid):
         """An external re-plan request (``replan_request``) from this estimate; waits for its
@@ -132,8 +131,7 @@ class RosLink:
         if vals.get("plan_kept") == "no":
             c.wait_for(lambda: (c.latest_schedule() or (-np.inf,))[0] >= t_s - 1e-3,
                        max(0.0, self.timeout_s - (time.perf_counter() - t0)))
-        names = {0: Level.OK, 1: Level.WARN, 2: Level.ERROR}
-        return names.get(level, f"ERROR {text}"), time.perf_counter() - t0
+        return _LEVEL_OF.get(level, f"ERROR {text}"), time.perf_counter() - t0
 
     def _thrust_for(self, t_s) -> bool:
         with self.client.cond:

@@ -168,10 +168,8 @@ class GuidanceNode(LifecycleNode):
             return TransitionCallbackReturn.FAILURE
         cfg = NodeConfig(**{f: g(f) for f in NodeConfig.__dataclass_fields__})
         policy = TriggerConfig(**{f: g(f) for f in TriggerConfig.__dataclass_fields__})
-        base = self.planner.base_problem
-        self.trigger = ReplanTrigger(self.planner.case, policy,
-                                     float(self.planner.units.time_s(base.stage_dt[0])),
-                                     base.N) if policy.self_replan else None
+        self.trigger = (ReplanTrigger.for_planner(self.planner, policy) if policy.self_replan
+                        else None)
         self.frame_id = cfg.frame_id
         self.plan_file = cfg.plan_file or self._bundled_plan()
         self.persist_file = cfg.persist_file
@@ -455,7 +453,7 @@ class GuidanceNode(LifecycleNode):
                           plan_max_violation=f"{plan.max_violation:.3e}")
             if newest is not None:
                 now = newest.stamp_s
-                ends = plan.epoch_s + plan.stage_start_s + plan.stage_dt_s
+                ends = plan.end_times_s
                 nxt = ends[ends > now]
                 values["plan_age_s"] = f"{now - plan.epoch_s:.3f}"
                 values["time_to_next_stage_s"] = f"{nxt[0] - now:.3f}" if nxt.size else "none"

@@ -103,6 +103,16 @@ class Plan:
         return np.concatenate([[0.0], np.cumsum(self.stage_dt_s)[:-1]])
 
     @property
+    def start_times_s(self) -> np.ndarray:
+        """(K,) stage start times [s] on the caller's clock."""
+        return self.epoch_s + self.stage_start_s
+
+    @property
+    def end_times_s(self) -> np.ndarray:
+        """(K,) stage end times [s] on the caller's clock."""
+        return self.start_times_s + self.stage_dt_s
+
+    @property
     def end_s(self) -> float:
         return self.epoch_s + float(np.sum(self.stage_dt_s))
 

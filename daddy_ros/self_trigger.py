@@ -70,6 +70,14 @@ class ReplanTrigger:
         self._t = None
         self._last = None     # time of the last estimate observed
 
+    @classmethod
+    def for_planner(cls, planner, settings: TriggerConfig) -> "ReplanTrigger":
+        """The policy for a ``GuidancePlanner``'s transfer: its scenario and nominal stage grid
+        (the base problem's N stages of equal length)."""
+        base = planner.base_problem
+        return cls(planner.case, settings, float(planner.units.time_s(base.stage_dt[0])),
+                   base.N)
+
     def observe(self, t_s: float, pos_m, vel_m_s, mass_kg: float,
                 plan: Plan | None) -> Reason | None:
         """The reason a re-plan is due at this estimate (None: not due). The first estimate
@@ -111,7 +119,7 @@ class ReplanTrigger:
     def _advance(self, t_s: float, plan: Plan) -> None:
         """Propagate the prediction to t_s with the plan's thrust, piece by piece between its
         stage starts."""
-        starts = plan.epoch_s + plan.stage_start_s
+        starts = plan.start_times_s
         cuts = [self._t, *starts[(starts > self._t + TIME_EPS_S) & (starts < t_s - TIME_EPS_S)],
                 t_s]
         for a, b in zip(cuts[:-1], cuts[1:]):

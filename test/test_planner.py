@@ -108,9 +108,8 @@ def _trigger(policy=None):
     """The node's re-plan policy on the bundled Earth-Mars nominal (40 stages of 8.7 days)."""
     pl = GuidancePlanner("earth_mars")
     pl.load_plan(PLANS_DIR / "earth_mars_fuel.json", T0_S)
-    base = pl.base_problem
-    stage_s = float(pl.units.time_s(base.stage_dt[0]))
-    return pl, ReplanTrigger(pl.case, policy or TriggerConfig(), stage_s, base.N), stage_s
+    trig = ReplanTrigger.for_planner(pl, policy or TriggerConfig())
+    return pl, trig, trig.stage_s
 
 
 def test_self_trigger_predicts_the_flight_and_flags_drift():
@@ -133,9 +132,9 @@ def test_self_trigger_predicts_the_flight_and_flags_drift():
     # an estimate older than the prediction (out of order) is not judged, nor moves it
     assert trig.observe(sim.t_s - 3600.0, pos + [9e4, 0, 0], vel, mass, plan) is None
     assert trig.observe(sim.t_s, pos + [6e3, 0, 0], vel, mass, plan) is None
-    off = ReplanTrigger(pl.case, TriggerConfig(trigger_position_m=0.0, trigger_velocity_m_s=0.0,
-                                               replan_every_stages=0, arrival_stages=0),
-                        stage_s, pl.base_problem.N)
+    off = ReplanTrigger.for_planner(pl, TriggerConfig(
+        trigger_position_m=0.0, trigger_velocity_m_s=0.0, replan_every_stages=0,
+        arrival_stages=0))
     assert off.observe(T0_S, pos, vel, mass, plan) is None
     assert off.observe(T0_S + 1.0, pos + 1e9, vel + 1e3, mass, plan) is None   # all off
 
