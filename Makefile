@@ -11,6 +11,7 @@ PY := $(VENV)/bin/python
 STAMP := $(VENV)/.bootstrapped
 PLOTS := $(VENV)/.plots
 RECORD := $(VENV)/.record
+CAMPAIGNS := $(VENV)/.campaigns
 PIP := $(PY) -m pip install --disable-pip-version-check -q -c requirements/pins.txt
 
 # Every rclpy process: discovery on loopback only, a per-run domain, logs in a temp dir.
@@ -50,18 +51,29 @@ $(RECORD): $(STAMP) requirements/record.txt
 	@$(PIP) -r requirements/record.txt && touch $@ || \
 	  echo "record: mcap could not be installed; gnc_demo --record will say so"
 
+# The campaigns extra (Dask): daddy_campaign run --executor dask; the tests run a loopback
+# LocalCluster.
+$(CAMPAIGNS): $(STAMP) requirements/campaigns.txt
+	@$(PIP) -r requirements/campaigns.txt && touch $@ || \
+	  echo "campaigns: dask could not be installed; --executor dask will say so"
+
 DEMO_CASE ?= halo_l2_l1
 demo: $(STAMP) $(PLOTS)
 	$(VENV)/bin/gnc_demo --case $(DEMO_CASE)
 
-test: $(STAMP) $(PLOTS) $(RECORD)
+test: $(STAMP) $(PLOTS) $(RECORD) $(CAMPAIGNS)
 	$(PY) -m pytest -q test
 
 test-slow: $(STAMP)
 	$(PY) -m pytest -q -m slow test --run-slow
 
-monte-carlo: $(STAMP)
-	OPENBLAS_NUM_THREADS=1 OMP_NUM_THREADS=1 $(VENV)/bin/gnc_demo --case $(DEMO_CASE) --runs $(or $(RUNS),100)
+# a dispersion campaign of the demo's loop: results file, summary and plot in out/
+# (EXECUTOR=dask: on a loopback Dask LocalCluster; JOBS: workers)
+MC_OUT := out/monte-carlo-$(DEMO_CASE).jsonl
+monte-carlo: $(STAMP) $(PLOTS) $(if $(filter dask,$(EXECUTOR)),$(CAMPAIGNS))
+	$(VENV)/bin/daddy_campaign run --case $(DEMO_CASE) --runs $(or $(RUNS),100) \
+	  --out $(MC_OUT) --overwrite --executor $(or $(EXECUTOR),local) \
+	  $(if $(JOBS),--jobs $(JOBS)) --plot $(MC_OUT:.jsonl=.png)
 
 reliability: $(STAMP)
 	cd test && ../$(PY) -m reliability $(if $(QUICK),--quick)

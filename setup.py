@@ -18,7 +18,8 @@ setup(
         ("share/" + package_name + "/launch", glob("launch/*.py")),
     ],
     install_requires=["setuptools", "numpy", "scipy"],
-    extras_require={"plots": ["matplotlib"], "record": ["mcap", "mcap-ros2-support"]},
+    extras_require={"plots": ["matplotlib"], "record": ["mcap", "mcap-ros2-support"],
+                    "campaigns": ["dask", "distributed"]},
     zip_safe=True,
     maintainer="daddy team",
     maintainer_email="daddy@example.invalid",
@@ -30,6 +31,7 @@ setup(
             "daddy = daddy_core.cli:main",
             "guidance_node = daddy_ros.guidance_node:main",
             "gnc_demo = daddy_ros.demo:main",
+            "daddy_campaign = daddy_ros.campaign_cli:main",
         ],
     },
 )

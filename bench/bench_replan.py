@@ -15,7 +15,7 @@ import time
 import numpy as np
 
 from daddy_ros.config import PLANS_DIR
-from daddy_ros.demo import nominal_planner
+from daddy_ros.closed_loop import nominal_planner
 from daddy_ros.sim import T0_S, Errors, TruthSim
 
 PERTURB = {"earth_mars": (1e6, 1.0), "halo_l2_l1": (1e4, 1e-2)}

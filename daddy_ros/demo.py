@@ -1,7 +1,9 @@
 """Closed-loop GNC demo: a truth simulator and the guidance node over real ROS 2 topics.
 
     gnc_demo [--case halo_l2_l1|earth_mars] [--replan-every K] [--plot FILE] [--seed S]
-    gnc_demo --runs 100            # Monte Carlo, same guidance logic called directly (no graph)
+    gnc_demo --runs 100            # Monte Carlo, same guidance logic called directly (no graph):
+                                   # a daddy_campaign campaign of the demo's settings, results in
+                                   # out/gnc_demo_runs.jsonl (daddy_campaign summary / plot)
 
 The simulator is a thin client: it publishes noisy state and mass estimates on its time grid
 and flies the schedule it receives with execution errors. The node decides the re-plans itself
@@ -12,52 +14,21 @@ the propellant against the open-loop optimum, the number of re-optimisations and
 from __future__ import annotations
 
 import argparse
-import concurrent.futures
 import os
-import statistics
 import time
 from dataclasses import asdict
 from pathlib import Path
 
 import numpy as np
 
-from .checks import InputRejected
-from .config import TriggerConfig, bundled_plan
+from .campaign_cli import execute
+from .campaign_executors import Executor
+from .campaign_results import Header, Results, ResultsWriter, format_summary, read_results, summarise
+from .campaigns import CampaignConfig, CampaignError, Guidance, Simulation, flight_record
+from .closed_loop import fly, nominal_planner
 from .plan import Level
-from .planner import GuidancePlanner
-from .self_trigger import Reason, ReplanTrigger
-from .sim import T0_S, Errors, TruthSim
-
-
-class DirectLink:
-    """Guidance called in-process (Monte Carlo mode): the node's re-plan policy
-    (``ReplanTrigger``) and planner, without the graph."""
-
-    def __init__(self, planner: GuidancePlanner, policy: TriggerConfig):
-        self.planner = planner
-        self.trigger = ReplanTrigger.for_planner(planner, policy)
-
-    def estimate(self, pos, vel, mass, t_s, rid):
-        """An estimate, as the node takes it: (reason, level, latency s) of the re-plan it
-        triggered, or None."""
-        reason = self.trigger.observe(t_s, pos, vel, mass, self.planner.plan)
-        if reason is None:
-            return None
-        self.trigger.replanned(t_s, pos, vel, mass)
-        t0 = time.perf_counter()
-        try:
-            level = self.planner.replan(pos, vel, mass, t_s, rid, now_s=t_s).level
-        except InputRejected as exc:
-            level = f"ERROR {exc}"
-        return reason, level, time.perf_counter() - t0
-
-    def thrust_at(self, t_s, pos, vel, mass):
-        plan = self.planner.plan
-        return plan.thrust_at(t_s) if plan else np.zeros(3)
-
-    def stage_starts(self) -> np.ndarray:
-        plan = self.planner.plan
-        return plan.start_times_s if plan else np.zeros(0)
+from .self_trigger import Reason
+from .sim import T0_S, TruthSim
 
 
 _LEVEL_OF = {0: Level.OK, 1: Level.WARN, 2: Level.ERROR}   # DiagnosticStatus level -> Level
@@ -168,106 +139,6 @@ class RosLink:
         self.client.close()
 
 
-def flight_steps(t0_s: float, N: int, dt_stage: float, substeps: int, final_stages: int,
-                 final_substeps: int, final_min_step: float):
-    """The closed loop's time grid, the times of its estimates: (start s, end s) per step.
-
-    Stages are flown in ``substeps`` steps; the last ``final_stages`` in steps of a stage /
-    ``final_substeps``, and the remaining time is halved from there on down to
-    ``final_min_step`` (a fraction of a stage): the arrival phase, where the node re-plans at
-    every estimate (``self_trigger``), so the last open-loop interval is short.
-    """
-    for stage in range(N - final_stages):
-        for i in range(substeps):
-            yield (t0_s + (stage + i / substeps) * dt_stage,
-                   t0_s + (stage + (i + 1) / substeps) * dt_stage)
-    t, t_end = t0_s + (N - final_stages) * dt_stage, t0_s + N * dt_stage
-    fine, shortest = dt_stage / final_substeps, final_min_step * dt_stage
-    while t_end - t > shortest * (1 + 1e-9):
-        rem = t_end - t
-        step = fine if rem > 2 * fine * (1 + 1e-9) else rem / 2
-        yield t, t + step
-        t += step
-    yield t, t_end
-
-
-def fly(link, sim: TruthSim, planner: GuidancePlanner, policy: TriggerConfig, substeps: int,
-        final_substeps: int = 0, progress=None) -> dict:
-    """Run the closed loop to the end of the transfer: an estimate to ``link`` at each step of
-    ``flight_steps`` (its arrival phase from ``policy``), which re-plans where ``policy`` says
-    (in the node, or in-process for a ``DirectLink``); the schedule is flown piecewise constant
-    between its stage starts. Returns the run's figures, the flown positions at the grid's
-    times (``flown_m``, (K, 3) m) and the thrust actually applied (``thrust_log``: (t_s,
-    |thrust| N) from each piece on)."""
-    N = planner.base_problem.N
-    dt_stage = sim.tof_s / N
-    latencies, levels, flown, thrust_log = [], [], [sim.truth_si()[0]], []
-    triggered = 0
-    link.estimate(*sim.estimate_si(), sim.t_s, "start")   # starts the policy's prediction
-    for j, (t0, t1) in enumerate(flight_steps(
-            sim.t_s, N, dt_stage, substeps, policy.arrival_stages,
-            final_substeps or substeps, policy.arrival_min_step)):
-        pos, vel, mass = sim.estimate_si()
-        out = link.estimate(pos, vel, mass, t0, f"r{j}")
-        if out is not None:
-            reason, level, lat = out
-            latencies.append(lat)
-            levels.append(level)
-            triggered += reason == Reason.DRIFT
-            if progress:
-                progress(f"  t = {(t0 - sim.t0_s) / 86400:7.3f} d  stage "
-                         f"{int((t0 - sim.t0_s) / dt_stage + 1e-9):3d}/{N}  replan {level:5s} "
-                         f"{lat * 1e3:8.1f} ms  ({reason})")
-        starts = link.stage_starts()
-        cuts = [t0, *starts[(starts > t0 + 1e-6) & (starts < t1 - 1e-6)], t1]
-        for a, b in zip(cuts[:-1], cuts[1:]):
-            thrust = link.thrust_at(a, pos, vel, mass)
-            applied = sim.apply(thrust, b - a)
-            thrust_log.append((a, float(np.linalg.norm(applied))))
-        flown.append(sim.truth_si()[0])
-    miss_r, miss_v = sim.miss()
-    m_final = sim.truth_si()[2]
-    return {"miss_km": miss_r / 1e3, "miss_cm_s": miss_v * 100, "final_mass_kg": m_final,
-            "replans": len(latencies), "triggered": triggered,
-            "latency_ms": [1e3 * x for x in latencies],
-            "levels": levels, "flown_m": np.array(flown), "thrust_log": np.array(thrust_log)}
-
-
-def nominal_planner(case: str, time_budget_s: float,
-                    arrival_tolerance_m: float = 0.0) -> tuple[GuidancePlanner, float]:
-    """A planner holding the open-loop optimum at T0 (bundled plan or a cold solve)."""
-    planner = GuidancePlanner(case, time_budget_s=time_budget_s,
-                              arrival_tolerance_m=arrival_tolerance_m)
-    plan_file = bundled_plan(case)
-    sim = TruthSim(case, t0_s=T0_S)
-    if plan_file is not None:
-        plan = planner.load_plan(plan_file, T0_S)
-    else:
-        p, v, m = sim.truth_si()
-        out = planner.replan(p, v, m, T0_S, "nominal", cold=True)
-        if not out.ok:
-            raise SystemExit(f"open-loop solve failed: {out.reason}")
-        plan = out.plan
-    return planner, float(plan.states_si[-1, 6])
-
-
-def summarise(runs: list[dict], m_open: float, m0: float) -> dict:
-    prop_open = m0 - m_open
-    ok = [r for r in runs if r["miss_km"] <= 1.0 and r["miss_cm_s"] <= 1.0
-          and abs((m0 - r["final_mass_kg"]) - prop_open) <= 0.01 * prop_open]
-    lat = [x for r in runs for x in r["latency_ms"]]
-    return {"runs": len(runs), "success": len(ok), "success_rate": len(ok) / max(len(runs), 1),
-            "miss_km_median": statistics.median(r["miss_km"] for r in runs),
-            "miss_km_max": max(r["miss_km"] for r in runs),
-            "miss_cm_s_median": statistics.median(r["miss_cm_s"] for r in runs),
-            "miss_cm_s_max": max(r["miss_cm_s"] for r in runs),
-            "propellant_open_loop_kg": prop_open,
-            "propellant_median_kg": statistics.median(m0 - r["final_mass_kg"] for r in runs),
-            "latency_ms_median": statistics.median(lat) if lat else float("nan"),
-            "latency_ms_max": max(lat) if lat else float("nan"),
-            "replans_per_run": statistics.mean(r["replans"] for r in runs)}
-
-
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser(prog="gnc_demo", description=__doc__.splitlines()[0])
     ap.add_argument("--case", default="halo_l2_l1", choices=["halo_l2_l1", "earth_mars", "dro_dro"])
@@ -275,14 +146,15 @@ def main(argv=None) -> int:
     ap.add_argument("--seed", type=int, default=1)
     ap.add_argument("--jobs", type=int, default=os.cpu_count() or 1,
                     help="Monte Carlo runs in parallel worker processes (default: one per core)")
-    policy = TriggerConfig()   # the node's defaults
+    policy, sim_defaults = Guidance(), Simulation()   # the node's and the campaigns' defaults
     ap.add_argument("--replan-every", type=int, default=policy.replan_every_stages,
                     help="stages between the node's re-optimisations (0: every 5 %% of the "
                          "stages; node parameter replan_every_stages)")
-    ap.add_argument("--substeps", type=int, default=2, help="simulation steps per stage")
+    ap.add_argument("--substeps", type=int, default=sim_defaults.substeps,
+                    help="simulation steps per stage")
     ap.add_argument("--final-stages", type=int, default=policy.arrival_stages,
                     help="the arrival phase, where every estimate re-plans (arrival_stages)")
-    ap.add_argument("--final-substeps", type=int, default=8,
+    ap.add_argument("--final-substeps", type=int, default=sim_defaults.final_substeps,
                     help="simulation steps (estimates) per stage in the arrival phase")
     ap.add_argument("--final-min-step", type=float, default=policy.arrival_min_step,
                     help="shortest final step (fraction of a stage): the remaining time is "
@@ -292,72 +164,72 @@ def main(argv=None) -> int:
                          "prediction (0: off; trigger_position_m)")
     ap.add_argument("--trigger-cm-s", type=float, default=policy.trigger_velocity_m_s * 100,
                     help="... or this fast (0: off; trigger_velocity_m_s)")
-    ap.add_argument("--arrival-tolerance-km", type=float, default=0.3,
+    ap.add_argument("--arrival-tolerance-km", type=float,
+                    default=policy.arrival_tolerance_m / 1e3,
                     help="in the arrival phase the guidance targets the velocity exactly and the "
                          "position within this distance (node parameter arrival_tolerance_m)")
-    ap.add_argument("--time-budget", type=float, default=60.0)
+    ap.add_argument("--time-budget", type=float, default=policy.time_budget_s)
     ap.add_argument("--no-errors", action="store_true", help="perfect navigation and execution")
     ap.add_argument("--plot", default="out/gnc_demo.png", help="PNG of flown vs planned")
     ap.add_argument("--record", metavar="FILE.mcap", default="",
                     help="record every topic of the ROS run to an MCAP file (the record extra)")
+    ap.add_argument("--results", default="out/gnc_demo_runs.jsonl",
+                    help="--runs: the campaign's results file (replaced; daddy_campaign "
+                         "summary/plot read it)")
     args = ap.parse_args(argv)
     os.environ["ROS_AUTOMATIC_DISCOVERY_RANGE"] = "LOCALHOST"  # the demo stays on loopback
-    errors = Errors(0, 0, 0, 0) if args.no_errors else Errors()
-    print(f"closed-loop GNC demo: {args.case}, navigation errors {errors.nav_pos_m} m / "
-          f"{errors.nav_vel_m_s * 1e3} mm/s, execution errors {errors.exec_mag:.0%} / "
-          f"{errors.exec_point_deg} deg (1 sigma)", flush=True)
     planner, m_open = nominal_planner(args.case, args.time_budget, args.arrival_tolerance_km * 1e3)
-    args.replan_every = args.replan_every or max(1, planner.base_problem.N // 20)
-    m0 = planner.case.spacecraft.wet_mass_kg
+    try:
+        config = campaign_config(args, planner.base_problem.N)
+    except CampaignError as exc:
+        ap.error(str(exc))
+    e = config.errors
+    print(f"closed-loop GNC demo: {args.case}, navigation errors {e.nav_pos_m} m / "
+          f"{e.nav_vel_m_s * 1e3} mm/s, execution errors {e.exec_mag:.0%} / "
+          f"{e.exec_point_deg} deg (1 sigma)", flush=True)
+    header = Header(config, m_open, planner.case.spacecraft.wet_mass_kg)
     print(f"open-loop optimum: final mass {m_open:.3f} kg", flush=True)
     if args.runs:
-        runs = []
-        seeds = [args.seed + i for i in range(args.runs)]
-        jobs = max(1, min(args.jobs, args.runs))
-        with concurrent.futures.ProcessPoolExecutor(jobs) as pool:
-            for i, r in enumerate(pool.map(_monte_carlo_run, [(args, errors, s) for s in seeds])):
-                runs.append(r)
-                print(f"run {i + 1:3d} seed {seeds[i]}: miss {r['miss_km']:.3f} km "
-                      f"{r['miss_cm_s']:.2f} cm/s, final mass {r['final_mass_kg']:.3f} kg, "
-                      f"{r['replans']} replans ({r['triggered']} on drift)", flush=True)
-        _print_summary(summarise(runs, m_open, m0))
+        with ResultsWriter.create(args.results, header, overwrite=True) as writer:
+            execute(writer, config, Executor.LOCAL, args.jobs,
+                    out=lambda line: print(line, flush=True))
+        results = read_results(args.results)
+        print(format_summary(summarise(results), results.header))
         return 0
-    return _ros_demo(args, planner, errors, m_open, m0)
+    return _ros_demo(args, config, planner, header)
 
 
-def _monte_carlo_run(job) -> dict:
-    """One closed-loop run without the ROS graph (a worker process of the Monte Carlo)."""
-    args, errors, seed = job
-    pl, _ = nominal_planner(args.case, args.time_budget, args.arrival_tolerance_km * 1e3)
-    sim = TruthSim(args.case, errors, seed=seed, t0_s=T0_S)
-    settings = _loop_settings(args)
-    r = fly(DirectLink(pl, settings["policy"]), sim, pl, **settings)
-    r.pop("flown_m")
-    r.pop("thrust_log")
-    return r
+def campaign_config(args, stages: int) -> CampaignConfig:
+    """The command line as a campaign (the ROS run is the campaign's first seed; ``--runs``
+    flies the rest in-process): errors, the node's re-plan policy and the loop's time grid.
+    Validated as a campaign file is (CampaignError names the field)."""
+    zero = {"position_m": 0.0, "velocity_m_s": 0.0}
+    return CampaignConfig.from_dict({
+        "case": args.case,
+        "seeds": {"first": args.seed, "count": max(args.runs, 1)},
+        "navigation": zero if args.no_errors else {},
+        "execution": {"magnitude": 0.0, "pointing_deg": 0.0} if args.no_errors else {},
+        "guidance": {"replan_every_stages": args.replan_every or max(1, stages // 20),
+                     "trigger_position_m": args.trigger_km * 1e3,
+                     "trigger_velocity_m_s": args.trigger_cm_s / 100,
+                     "arrival_stages": args.final_stages,
+                     "arrival_min_step": args.final_min_step,
+                     "arrival_tolerance_m": args.arrival_tolerance_km * 1e3,
+                     "time_budget_s": args.time_budget},
+        "simulation": {"substeps": args.substeps, "final_substeps": args.final_substeps},
+    }, where="gnc_demo")
 
 
-def _loop_settings(args) -> dict:
-    """fly()'s time grid and the node's re-plan policy from the command line."""
-    policy = TriggerConfig(replan_every_stages=args.replan_every,
-                           trigger_position_m=args.trigger_km * 1e3,
-                           trigger_velocity_m_s=args.trigger_cm_s / 100,
-                           arrival_stages=args.final_stages,
-                           arrival_min_step=args.final_min_step)
-    return {"policy": policy, "substeps": args.substeps, "final_substeps": args.final_substeps}
-
-
-def _ros_demo(args, planner, errors, m_open, m0) -> int:
+def _ros_demo(args, config: CampaignConfig, planner, header: Header) -> int:
     import rclpy
     from rclpy.signals import SignalHandlerOptions
 
     from .guidance_node import GuidanceNode
     from .spin import SpinThread
     rclpy.init(signal_handler_options=SignalHandlerOptions.NO)
-    settings = _loop_settings(args)
-    guidance = GuidanceNode(scenario=args.case, time_budget_s=args.time_budget,
-                            arrival_tolerance_m=args.arrival_tolerance_km * 1e3,
-                            **asdict(settings["policy"]))
+    g = config.guidance
+    guidance = GuidanceNode(scenario=config.case, time_budget_s=g.time_budget_s,
+                            arrival_tolerance_m=g.arrival_tolerance_m, **asdict(g.policy))
     recorder = None
     if args.record:   # before anything is published: the recorder sees the whole run
         from .recording import McapRecorder
@@ -369,9 +241,9 @@ def _ros_demo(args, planner, errors, m_open, m0) -> int:
         if not link.wait_connected():
             print("ROS graph did not connect on loopback", flush=True)
             return 1
-        sim = TruthSim(args.case, errors, seed=args.seed, t0_s=T0_S)
-        r = fly(link, sim, guidance.planner, progress=lambda s: print(s, flush=True),
-                **settings)
+        sim = TruthSim(config.case, config.errors, seed=config.seeds[0], t0_s=T0_S)
+        r = fly(link, sim, guidance.planner, g.policy, config.simulation.substeps,
+                config.simulation.final_substeps, progress=lambda s: print(s, flush=True))
     finally:
         if recorder is not None:
             counts = recorder.close()
@@ -382,8 +254,9 @@ def _ros_demo(args, planner, errors, m_open, m0) -> int:
         link.close()
         guidance.destroy_node()
         rclpy.try_shutdown()
-    s = summarise([r], m_open, m0)
-    _print_summary(s)
+    record = flight_record(config, config.seeds[0], r, header.propellant_open_loop_kg,
+                           header.wet_mass_kg)
+    print(format_summary(summarise(Results(header, (record,))), header))
     print(f"re-optimisations: {r['replans']} ({sum(1 for x in r['levels'] if x == 'OK')} OK), "
           f"coalesced triggers: {guidance.coalesced}")
     if args.plot:
@@ -393,17 +266,6 @@ def _ros_demo(args, planner, errors, m_open, m0) -> int:
         except ImportError:
             print("plot skipped: matplotlib not installed (the plots extra; make demo installs it)")
     return 0
-
-
-def _print_summary(s: dict) -> None:
-    print(f"terminal miss: {s['miss_km_median']:.3f} km (max {s['miss_km_max']:.3f}), "
-          f"{s['miss_cm_s_median']:.3f} cm/s (max {s['miss_cm_s_max']:.3f})")
-    print(f"propellant: {s['propellant_median_kg']:.3f} kg vs open-loop optimum "
-          f"{s['propellant_open_loop_kg']:.3f} kg")
-    print(f"re-optimisation latency: median {s['latency_ms_median']:.1f} ms, max "
-          f"{s['latency_ms_max']:.1f} ms; {s['replans_per_run']:.1f} per run")
-    print(f"success (<= 1 km, <= 1 cm/s, propellant within 1 %): {s['success']}/{s['runs']} "
-          f"({s['success_rate']:.0%})")
 
 
 def plot_closed_loop(r: dict, plan, path) -> None:

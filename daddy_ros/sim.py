@@ -27,13 +27,24 @@ class Errors:
 class TruthSim:
     """The real spacecraft: state in SI, advanced with piecewise-constant applied thrust."""
 
-    def __init__(self, case_name: str, errors: Errors = Errors(), seed: int = 0, t0_s: float = 0.0):
+    def __init__(self, case_name: str, errors: Errors = Errors(), seed: int = 0,
+                 t0_s: float = 0.0, initial_offset_si: np.ndarray | None = None,
+                 outage_s: tuple[float, float] | None = None):
+        """``initial_offset_si``: (6,) the truth's departure state minus the case's [m, m/s]
+        (an initial-state dispersion); ``outage_s``: (start, end) on the mission clock [s], an
+        interval in which the engine does not fire whatever is commanded (a missed-thrust
+        event; guidance is not told). The errors' random stream depends on ``seed`` only."""
         self.case = load_case(case_name)
         self.units = self.case.units
         self.rhs = self.case.rhs()
         self.errors = errors
         self.rng = np.random.default_rng(seed)
         self.x = self.case.x0.copy()        # normalised truth
+        if initial_offset_si is not None:
+            x_si = self.units.states_si(self.x)
+            x_si[:6] += np.asarray(initial_offset_si, dtype=float)
+            self.x = self.units.states_normalised(x_si)
+        self.outage_s = outage_s
         self.t_s = t0_s
         self.t0_s = t0_s
 
@@ -54,8 +65,8 @@ class TruthSim:
                 v + self.rng.normal(scale=e.nav_vel_m_s, size=3), m)
 
     def apply(self, thrust_n: np.ndarray, dt_s: float) -> np.ndarray:
-        """Fly ``dt_s`` with the commanded thrust perturbed by execution errors; returns the
-        thrust actually applied [N]."""
+        """Fly ``dt_s`` with the commanded thrust perturbed by execution errors (and none in an
+        outage); returns the thrust actually applied at the start of the step [N]."""
         u = np.asarray(thrust_n, dtype=float)
         mag = np.linalg.norm(u)
         if mag > 0:
@@ -69,9 +80,20 @@ class TruthSim:
             umax = self.case.spacecraft.max_thrust_n
             if np.linalg.norm(u) > umax * 1.05:  # the engine cannot exceed its rating by much
                 u *= umax * 1.05 / np.linalg.norm(u)
-        self.x = self.propagate(self.x, u, dt_s)
+        pieces = [(dt, u if on else np.zeros(3)) for dt, on in self._engine_windows(dt_s)]
+        for dt, thrust in pieces:
+            self.x = self.propagate(self.x, thrust, dt)
         self.t_s += dt_s
-        return u
+        return pieces[0][1]
+
+    def _engine_windows(self, dt_s: float) -> list[tuple[float, bool]]:
+        """The next ``dt_s`` cut at the outage's edges: (duration s, engine on) per piece."""
+        t0, t1 = self.t_s, self.t_s + dt_s
+        if self.outage_s is None or not (self.outage_s[0] < t1 and t0 < self.outage_s[1]):
+            return [(dt_s, True)]
+        cuts = [t0, *[c for c in self.outage_s if t0 < c < t1], t1]
+        return [(b - a, not self.outage_s[0] <= 0.5 * (a + b) < self.outage_s[1])
+                for a, b in zip(cuts[:-1], cuts[1:])]
 
     def propagate(self, x: np.ndarray, thrust_n: np.ndarray, dt_s: float) -> np.ndarray:
         """The true dynamics without errors: normalised state x after dt_s under thrust_n [N]."""

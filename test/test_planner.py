@@ -8,7 +8,7 @@ import pytest
 from daddy_core.errors import DaddyError
 from daddy_ros.checks import InputRejected
 from daddy_ros.config import PLANS_DIR, TriggerConfig
-from daddy_ros.demo import flight_steps
+from daddy_ros.closed_loop import flight_steps
 from daddy_ros.planner import GuidancePlanner
 from daddy_ros.self_trigger import Reason, ReplanTrigger
 from daddy_ros.shift import ARRIVAL_SPEED_SCALE_M_S, MIN_STAGE_FRACTION, MIN_STAGES_LEFT

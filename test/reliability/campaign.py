@@ -162,7 +162,7 @@ def _ros_session(fn):
 
 def _nominal():
     """(planner holding the nominal plan at T0, truth sim at T0, thrust bound N)."""
-    from daddy_ros.demo import nominal_planner
+    from daddy_ros.closed_loop import nominal_planner
     from daddy_ros.sim import Errors, TruthSim
     planner, _ = nominal_planner(SCENARIO, 60.0)
     sim = TruthSim(SCENARIO, Errors(0, 0, 0, 0), t0_s=T0_S)
@@ -652,7 +652,8 @@ def process_faults(sizes: Sizes, workdir: Path, progress=None) -> list[Row]:
 
     from daddy_ros import conversions as cv
     from daddy_ros.config import TriggerConfig
-    from daddy_ros.demo import RosLink, fly
+    from daddy_ros.closed_loop import fly
+    from daddy_ros.demo import RosLink
     from daddy_ros.sim import Errors, TruthSim
 
     planner, _, _ = _nominal()

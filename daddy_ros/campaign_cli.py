@@ -1,0 +1,214 @@
+"""daddy_campaign: dispersion campaigns of the closed GNC loop, their results files and plots.
+
+    daddy_campaign run [CAMPAIGN.yaml] [--case C] [--runs N] [--first-seed S] [--out F.jsonl]
+                       [--executor local|dask] [--jobs J] [--scheduler tcp://HOST:PORT]
+    daddy_campaign run --resume F.jsonl        # the seeds not yet in F, same config
+    daddy_campaign summary F.jsonl [--json]
+    daddy_campaign merge A.jsonl B.jsonl -o C.jsonl
+    daddy_campaign plot F.jsonl [-o F.png]
+
+A campaign file holds the sections of ``campaigns.CampaignConfig`` (any omitted field takes its
+default; the defaults are ``make monte-carlo``'s). Every finished run is appended to the results
+file at once, so an interrupted campaign resumes where it stopped.
+"""
+from __future__ import annotations
+
+import argparse
+import json
+import math
+import sys
+import time
+from dataclasses import asdict, replace
+from pathlib import Path
+
+from .campaign_executors import Executor, check_executor, open_executor
+from .campaign_results import (Header, Results, ResultsWriter, format_summary, merge_results,
+                               package_version, read_results, summarise)
+from .campaigns import CampaignConfig, CampaignError, check_case, load_config, run_campaign
+
+
+def open_loop_header(config: CampaignConfig) -> Header:
+    """The header of a new results file: the open-loop optimum the runs start from."""
+    from .closed_loop import nominal_planner
+    planner, m_open = nominal_planner(config.case, config.guidance.time_budget_s,
+                                      config.guidance.arrival_tolerance_m)
+    return Header(config, m_open, planner.case.spacecraft.wet_mass_kg)
+
+
+def execute(writer: ResultsWriter, config: CampaignConfig, executor: Executor, jobs: int,
+            scheduler: str = "", out=print) -> int:
+    """Run the seeds of ``config`` that ``writer``'s file lacks, appending each record as it
+    finishes; ``out`` gets the executor's description and a progress line per run. Returns
+    the number of runs made."""
+    todo = [s for s in config.seeds if s not in writer.recorded]
+    if not todo:
+        out(f"{writer.path}: all {len(config.seeds)} seeds already recorded")
+        return 0
+    already = len(config.seeds) - len(todo)
+    with open_executor(executor, min(jobs, len(todo)) if not scheduler else jobs,
+                       scheduler) as (pool, what):
+        out(f"{len(todo)} runs on {what}" + (f" ({already} already in {writer.path})"
+                                              if already else "") + f" -> {writer.path}")
+        t0, ok = time.perf_counter(), 0
+        for i, rec in enumerate(run_campaign(config, todo, pool), 1):
+            writer.append(rec)
+            ok += rec.success
+            eta = (time.perf_counter() - t0) / i * (len(todo) - i)
+            out(f"[{already + i}/{len(config.seeds)}] {rec.line()} | success {ok}/{i} "
+                f"| ETA {_duration(eta)}")
+    return len(todo)
+
+
+def _duration(s: float) -> str:
+    s = int(round(s))
+    return f"{s // 3600}h{s % 3600 // 60:02d}m" if s >= 3600 else f"{s // 60}m{s % 60:02d}s"
+
+
+def _config_from_args(args, base: CampaignConfig | None = None) -> CampaignConfig:
+    """The campaign file (else ``base``, else the defaults) with the command line's case and
+    seeds."""
+    config = load_config(args.config) if args.config else (base or CampaignConfig())
+    if args.case:
+        check_case(args.case, "--case")
+        config = replace(config, case=args.case)
+    if args.runs is not None or args.first_seed is not None:
+        first = args.first_seed if args.first_seed is not None else config.seeds[0]
+        count = args.runs if args.runs is not None else len(config.seeds)
+        if count < 1:
+            raise CampaignError(f"--runs: must be at least 1, got {count}")
+        config = replace(config, seeds=tuple(range(first, first + count)))
+    return config
+
+
+def _cmd_run(args) -> int:
+    check_executor(Executor(args.executor), args.jobs, args.scheduler)
+    if args.resume:
+        if args.out or args.overwrite:
+            raise CampaignError("--resume: appends to its own file (no --out, --overwrite)")
+        writer = ResultsWriter.resume(args.resume)
+        config = _config_from_args(args, base=writer.header.config)
+        if config.experiment() != writer.header.config.experiment():
+            raise CampaignError(f"--resume {args.resume}: the file holds another experiment "
+                                "than the campaign given (merge files of one experiment only)")
+        if writer.header.version != (v := package_version()):
+            print(f"note: {args.resume} was started by daddy_ros {writer.header.version}, this "
+                  f"is {v}", flush=True)
+    else:
+        config = _config_from_args(args)
+        out = args.out or f"out/campaign-{config.case}.jsonl"
+        header = open_loop_header(config)
+        writer = ResultsWriter.create(out, header, overwrite=args.overwrite)
+    with writer:
+        try:
+            execute(writer, config, Executor(args.executor), args.jobs, args.scheduler,
+                    out=lambda s: print(s, flush=True))
+        except KeyboardInterrupt:
+            print(f"\ninterrupted: {len(writer.recorded)} runs in {writer.path}; continue with "
+                  f"daddy_campaign run --resume {writer.path}", flush=True)
+            return 130
+    results = read_results(writer.path)
+    print()
+    print(format_summary(summarise(results), results.header))
+    if args.plot:
+        _plot(results, args.plot)
+    return 0
+
+
+def _cmd_summary(args) -> int:
+    results = read_results(args.file)
+    s = summarise(results)
+    if args.json:
+        print(json.dumps(_jsonable(asdict(s)), indent=1))
+    else:
+        print(format_summary(s, results.header))
+        if results.partial_lines:
+            print("(a partial last line, an interrupted write, was ignored)")
+    return 0
+
+
+def _jsonable(x):
+    if isinstance(x, float) and math.isnan(x):
+        return None
+    if isinstance(x, dict):
+        return {k: _jsonable(v) for k, v in x.items()}
+    if isinstance(x, (list, tuple)):
+        return [_jsonable(v) for v in x]
+    return x
+
+
+def _cmd_merge(args) -> int:
+    results, dropped = merge_results(args.files, args.output, overwrite=args.overwrite)
+    print(f"{args.output}: {len(results.records)} runs from {len(args.files)} files"
+          + (f" ({dropped} duplicate seeds kept once)" if dropped else ""))
+    return 0
+
+
+def _cmd_plot(args) -> int:
+    results = read_results(args.file)
+    return _plot(results, args.output or str(Path(args.file).with_suffix(".png")))
+
+
+def _plot(results: Results, path: str) -> int:
+    from .campaign_plot import plot_campaign
+    try:
+        plot_campaign(results, path)
+    except ImportError:
+        print("plot skipped: matplotlib not installed (pip install 'daddy_ros[plots]')")
+        return 1
+    print(f"plot: {path}")
+    return 0
+
+
+def build_parser() -> argparse.ArgumentParser:
+    ap = argparse.ArgumentParser(prog="daddy_campaign", description=__doc__.splitlines()[0])
+    sub = ap.add_subparsers(dest="command", required=True)
+    run = sub.add_parser("run", help="run a campaign (or the rest of one: --resume)")
+    run.add_argument("config", nargs="?", help="campaign file (.json, .yaml); default: the "
+                                               "make monte-carlo campaign")
+    run.add_argument("--case", help="the catalogue case (overrides the file's)")
+    run.add_argument("--runs", type=int, help="seeds first-seed .. first-seed + runs - 1")
+    run.add_argument("--first-seed", type=int)
+    run.add_argument("--out", help="results file (default out/campaign-CASE.jsonl)")
+    run.add_argument("--overwrite", action="store_true", help="replace an existing --out")
+    run.add_argument("--resume", metavar="FILE", help="continue FILE: run its seeds not yet "
+                                                      "recorded")
+    run.add_argument("--executor", choices=[e.value for e in Executor], default="local")
+    run.add_argument("--jobs", type=int, default=_cores(),
+                     help="worker processes (default: one per core)")
+    run.add_argument("--scheduler", default="", metavar="tcp://HOST:PORT",
+                     help="submit to this existing Dask cluster (with --executor dask)")
+    run.add_argument("--plot", metavar="PNG", help="also plot the results")
+    run.set_defaults(func=_cmd_run)
+    sm = sub.add_parser("summary", help="summary table of a results file")
+    sm.add_argument("file")
+    sm.add_argument("--json", action="store_true", help="as JSON")
+    sm.set_defaults(func=_cmd_summary)
+    mg = sub.add_parser("merge", help="merge results files of one experiment")
+    mg.add_argument("files", nargs="+")
+    mg.add_argument("-o", "--output", required=True)
+    mg.add_argument("--overwrite", action="store_true")
+    mg.set_defaults(func=_cmd_merge)
+    pl = sub.add_parser("plot", help="PNG of a results file: miss scatter, propellant, latency")
+    pl.add_argument("file")
+    pl.add_argument("-o", "--output", help="PNG (default: the results file's name .png)")
+    pl.set_defaults(func=_cmd_plot)
+    return ap
+
+
+def _cores() -> int:
+    import os
+    return len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else (
+        os.cpu_count() or 1)
+
+
+def main(argv=None) -> int:
+    args = build_parser().parse_args(argv)
+    try:
+        return args.func(args)
+    except CampaignError as exc:
+        print(f"daddy_campaign: error: {exc}", file=sys.stderr)
+        return 2
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())
