@@ -32,7 +32,7 @@ import numpy as np
 
 from daddy_core.errors import DaddyError
 
-from .config import TriggerConfig, _param
+from .config import TriggerConfig, option
 from .sim import T0_S, Errors
 
 
@@ -49,16 +49,16 @@ class CampaignError(DaddyError):
 class Navigation:
     """Navigation errors on every published estimate, 1 sigma per axis."""
 
-    position_m: float = _param(Errors.nav_pos_m, "position [m]", bounds=(0.0, 1e12))
-    velocity_m_s: float = _param(Errors.nav_vel_m_s, "velocity [m/s]", bounds=(0.0, 1e6))
+    position_m: float = option(Errors.nav_pos_m, "position [m]", bounds=(0.0, 1e12))
+    velocity_m_s: float = option(Errors.nav_vel_m_s, "velocity [m/s]", bounds=(0.0, 1e6))
 
 
 @dataclass(frozen=True)
 class Execution:
     """Thrust execution errors on every flown piece, 1 sigma."""
 
-    magnitude: float = _param(Errors.exec_mag, "relative thrust magnitude", bounds=(0.0, 1.0))
-    pointing_deg: float = _param(Errors.exec_point_deg, "pointing [deg]", bounds=(0.0, 180.0))
+    magnitude: float = option(Errors.exec_mag, "relative thrust magnitude", bounds=(0.0, 1.0))
+    pointing_deg: float = option(Errors.exec_point_deg, "pointing [deg]", bounds=(0.0, 180.0))
 
 
 @dataclass(frozen=True)
@@ -66,8 +66,8 @@ class InitialState:
     """Dispersion of the true departure state about the case's, 1 sigma per axis (guidance
     starts from the nominal plan and sees it in the first estimates)."""
 
-    position_m: float = _param(0.0, "position [m]", bounds=(0.0, 1e12))
-    velocity_m_s: float = _param(0.0, "velocity [m/s]", bounds=(0.0, 1e6))
+    position_m: float = option(0.0, "position [m]", bounds=(0.0, 1e12))
+    velocity_m_s: float = option(0.0, "velocity [m/s]", bounds=(0.0, 1e6))
 
 
 @dataclass(frozen=True)
@@ -77,10 +77,10 @@ class MissedThrust:
     flight; guidance is not told (it sees the drift). A range [low, high] is drawn uniformly,
     a single number is fixed."""
 
-    probability: float = _param(0.0, "chance of one outage per run", bounds=(0.0, 1.0))
-    start_fraction: tuple = _param((0.1, 0.9), "outage start, fraction of the time of flight",
+    probability: float = option(0.0, "chance of one outage per run", bounds=(0.0, 1.0))
+    start_fraction: tuple = option((0.1, 0.9), "outage start, fraction of the time of flight",
                                    bounds=(0.0, 1.0))
-    duration_hours: tuple = _param((24.0, 24.0), "outage duration [h]", bounds=(0.0, 1e6))
+    duration_hours: tuple = option((24.0, 24.0), "outage duration [h]", bounds=(0.0, 1e6))
 
 
 @dataclass(frozen=True)
@@ -88,10 +88,10 @@ class Guidance(TriggerConfig):
     """The node's re-plan policy (``TriggerConfig``, the node's own parameters and defaults)
     and the planner settings a campaign varies."""
 
-    arrival_tolerance_m: float = _param(300.0, "terminal position tolerance of the arrival "
+    arrival_tolerance_m: float = option(300.0, "terminal position tolerance of the arrival "
                                                "phase [m] (node parameter arrival_tolerance_m)",
                                         bounds=(0.0, 1e9))
-    time_budget_s: float = _param(60.0, "wall-clock budget of one re-optimisation [s]",
+    time_budget_s: float = option(60.0, "wall-clock budget of one re-optimisation [s]",
                                   bounds=(1e-3, 86_400.0))
 
     @property
@@ -103,8 +103,8 @@ class Guidance(TriggerConfig):
 class Simulation:
     """The closed loop's time grid (``closed_loop.flight_steps``)."""
 
-    substeps: int = _param(2, "estimates per stage", bounds=(1, 10_000))
-    final_substeps: int = _param(8, "estimates per stage in the arrival phase",
+    substeps: int = option(2, "estimates per stage", bounds=(1, 10_000))
+    final_substeps: int = option(8, "estimates per stage in the arrival phase",
                                  bounds=(1, 10_000))
 
 
@@ -113,9 +113,9 @@ class Success:
     """A run succeeds when it arrives within both miss limits and spends no more than this
     fraction of propellant above or below the open-loop optimum."""
 
-    miss_km: float = _param(1.0, "terminal position miss limit [km]", bounds=(0.0, 1e12))
-    miss_cm_s: float = _param(1.0, "terminal velocity miss limit [cm/s]", bounds=(0.0, 1e12))
-    propellant_fraction: float = _param(0.01, "propellant deviation limit, fraction of the "
+    miss_km: float = option(1.0, "terminal position miss limit [km]", bounds=(0.0, 1e12))
+    miss_cm_s: float = option(1.0, "terminal velocity miss limit [cm/s]", bounds=(0.0, 1e12))
+    propellant_fraction: float = option(0.01, "propellant deviation limit, fraction of the "
                                               "open-loop optimum's", bounds=(0.0, 1e6))
 
     def met(self, miss_km: float, miss_cm_s: float, propellant_kg: float,

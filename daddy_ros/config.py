@@ -20,12 +20,13 @@ def bundled_plan(case_name: str, fuel_optimal: bool = True) -> Path | None:
     return p if p.exists() else None
 
 
-def _param(default, description: str, runtime: bool = False, static: bool = False,
+def option(default, description: str, runtime: bool = False, static: bool = False,
            bounds: tuple | None = None):
-    """A dataclass field that is also a node parameter. ``runtime``: settable in every
-    lifecycle state (the others only while unconfigured); ``static``: read when the node is
-    constructed, so never settable afterwards (a read-only descriptor); ``bounds``: the
-    (lowest, highest) value, a range in the descriptor that rclpy enforces."""
+    """A dataclass field with its description and limits: a node parameter (here) or a field
+    of a campaign file (``campaigns``). ``runtime``: settable in every lifecycle state (the
+    others only while unconfigured); ``static``: read when the node is constructed, so never
+    settable afterwards (a read-only descriptor); ``bounds``: the (lowest, highest) value, a
+    range in the descriptor that rclpy enforces and the campaign file's check."""
     return field(default=default, metadata={"description": description, "runtime": runtime,
                                             "static": static, "bounds": bounds})
 
@@ -35,32 +36,32 @@ class PlannerConfig:
     """What the guidance planner re-optimises and how (SI units; 0 for a tolerance: the case's
     own)."""
 
-    scenario: str = _param("halo_l2_l1", "catalogue case name or path to a case .json file")
-    method: str = _param("dyn", f"DDP method, one of {', '.join(METHODS)}")
-    polish: bool = _param(True, "Newton polishing after each re-optimisation")
-    fuel_optimal: bool = _param(True, "fuel-optimal cost (else energy-optimal)")
-    stages: int = _param(0, "stage count of the scenario (0: the case's own)",
+    scenario: str = option("halo_l2_l1", "catalogue case name or path to a case .json file")
+    method: str = option("dyn", f"DDP method, one of {', '.join(METHODS)}")
+    polish: bool = option(True, "Newton polishing after each re-optimisation")
+    fuel_optimal: bool = option(True, "fuel-optimal cost (else energy-optimal)")
+    stages: int = option(0, "stage count of the scenario (0: the case's own)",
                          bounds=(0, 100_000))
-    tol_aul: float = _param(0.0, "augmented-Lagrangian tolerance (0: the case's own for cold "
+    tol_aul: float = option(0.0, "augmented-Lagrangian tolerance (0: the case's own for cold "
                                  "solves, 1e-5 for polished warm re-optimisations, which Newton "
                                  "then takes to tol_newton)", bounds=(0.0, 1.0))
-    tol_newton: float = _param(0.0, "Newton polishing tolerance (0: the case's own)",
+    tol_newton: float = option(0.0, "Newton polishing tolerance (0: the case's own)",
                                bounds=(0.0, 1.0))
-    time_budget_s: float = _param(60.0, "wall-clock budget of one re-optimisation [s]",
+    time_budget_s: float = option(60.0, "wall-clock budget of one re-optimisation [s]",
                                   runtime=True, bounds=(1e-3, 86_400.0))
-    restore_first: bool = _param(True, "restore feasibility of the warm start by Newton before "
+    restore_first: bool = option(True, "restore feasibility of the warm start by Newton before "
                                        "DDP, so a re-optimisation stopped by its budget still "
                                        "yields a feasible plan (and re-plans are faster)")
-    arrival_tolerance_m: float = _param(0.0, "in the arrival phase (the last re-gridded stages) "
+    arrival_tolerance_m: float = option(0.0, "in the arrival phase (the last re-gridded stages) "
                                              "the terminal position may be this far from the "
                                              "target, the velocity stays exact [m]; 0: position "
                                              "exact too", bounds=(0.0, 1e9))
-    thrust_margin: float = _param(0.05, "fraction of the thrust rating plans hold back for "
+    thrust_margin: float = option(0.05, "fraction of the thrust rating plans hold back for "
                                         "closed-loop corrections; a re-optimisation gives it up "
                                         "in steps (with 0.05: 95, 97, 98.5, 100 % of the "
                                         "rating) only when the target is out of reach "
                                         "otherwise; 0: the full rating", bounds=(0.0, 0.99))
-    staleness_s: float = _param(600.0, "estimates older than this relative to the request are "
+    staleness_s: float = option(600.0, "estimates older than this relative to the request are "
                                        "rejected [s]", runtime=True, bounds=(1e-3, 1e9))
     # a mass estimate may exceed the wet mass by this [kg] (not a node parameter)
     mass_tolerance_kg: float = 1e-6
@@ -79,19 +80,19 @@ class TriggerConfig:
     stage boundary, on drift from its prediction of the schedule in force, and on every
     estimate of the arrival phase. 0 turns a rule off."""
 
-    self_replan: bool = _param(True, "re-plan by itself (stage boundaries, drift, arrival "
+    self_replan: bool = option(True, "re-plan by itself (stage boundaries, drift, arrival "
                                      "phase); false: only on requests")
-    replan_every_stages: int = _param(1, "re-plan at every n-th stage boundary of the "
+    replan_every_stages: int = option(1, "re-plan at every n-th stage boundary of the "
                                          "transfer's nominal grid (0: never)",
                                       bounds=(0, 100_000))
-    trigger_position_m: float = _param(5000.0, "re-plan when the estimate drifts this far from "
+    trigger_position_m: float = option(5000.0, "re-plan when the estimate drifts this far from "
                                                "the predicted flight of the schedule in force "
                                                "[m] (0: no position test)", bounds=(0.0, 1e12))
-    trigger_velocity_m_s: float = _param(0.05, "... or this fast [m/s] (0: no velocity test)",
+    trigger_velocity_m_s: float = option(0.05, "... or this fast [m/s] (0: no velocity test)",
                                          bounds=(0.0, 1e6))
-    arrival_stages: int = _param(2, "the arrival phase: the last n nominal stages, where every "
+    arrival_stages: int = option(2, "the arrival phase: the last n nominal stages, where every "
                                     "estimate re-plans (0: none)", bounds=(0, 100_000))
-    arrival_min_step: float = _param(1 / 256, "... until less than this fraction of a nominal "
+    arrival_min_step: float = option(1 / 256, "... until less than this fraction of a nominal "
                                               "stage remains (the last open-loop interval)",
                                      bounds=(0.0, 1.0))
 
@@ -100,34 +101,34 @@ class TriggerConfig:
 class NodeConfig:
     """The node's frame, files and topic names."""
 
-    autostart: bool = _param(True, "configure and activate at start-up (a plain `ros2 run`); "
+    autostart: bool = option(True, "configure and activate at start-up (a plain `ros2 run`); "
                                    "false: an external lifecycle manager drives the "
                                    "transitions through the standard lifecycle services",
                              static=True)
-    diagnostics_period_s: float = _param(1.0, "period of the node's health status on "
+    diagnostics_period_s: float = option(1.0, "period of the node's health status on "
                                               "/diagnostics [s] (lifecycle state, plan age, "
                                               "next stage, last solve); 0: none",
                                          static=True, bounds=(0.0, 3600.0))
-    frame_id: str = _param("earth_moon_rotating", "frame of state estimates and thrust")
-    plan_file: str = _param("", "nominal plan (solution JSON) adopted at the first estimate; "
+    frame_id: str = option("earth_moon_rotating", "frame of state estimates and thrust")
+    plan_file: str = option("", "nominal plan (solution JSON) adopted at the first estimate; "
                                 "empty: the bundled nominal of the scenario if any, else a cold "
                                 "solve on request")
-    persist_file: str = _param("", "the current plan is written here after every new plan and "
+    persist_file: str = option("", "the current plan is written here after every new plan and "
                                    "restored from here at start-up (crash recovery); empty: no "
                                    "persistence")
-    state_topic: str = _param("state_estimate", "nav_msgs/Odometry input")
-    mass_topic: str = _param("mass_estimate", "geometry_msgs/InertiaStamped input (kg)")
-    request_topic: str = _param("replan_request", "std_msgs/Header input: frame_id = request id")
-    schedule_topic: str = _param("control_schedule", "trajectory_msgs/JointTrajectory output (N)",
+    state_topic: str = option("state_estimate", "nav_msgs/Odometry input")
+    mass_topic: str = option("mass_estimate", "geometry_msgs/InertiaStamped input (kg)")
+    request_topic: str = option("replan_request", "std_msgs/Header input: frame_id = request id")
+    schedule_topic: str = option("control_schedule", "trajectory_msgs/JointTrajectory output (N)",
                                  static=True)
-    thrust_topic: str = _param("thrust_command", "geometry_msgs/Vector3Stamped output (N)",
+    thrust_topic: str = option("thrust_command", "geometry_msgs/Vector3Stamped output (N)",
                                static=True)
-    path_topic: str = _param("planned_path", "nav_msgs/Path output (m)", static=True)
+    path_topic: str = option("planned_path", "nav_msgs/Path output (m)", static=True)
 
 
 @dataclass(frozen=True)
 class Parameter:
-    """One node parameter: its name, default, description, when it may change (``_param``)
+    """One node parameter: its name, default, description, when it may change (``option``)
     and its bounds."""
 
     name: str

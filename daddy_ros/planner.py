@@ -33,6 +33,16 @@ from .replan_policy import LADDER_MIN_GAIN, ReplanPolicy, margin_ratings
 from .shift import MIN_STAGES_LEFT, Shifted, shift_plan
 
 
+# a solve started with less than this left of the re-plan's budget gets this much (the
+# solver's own clock needs a positive budget; a re-plan may overrun by it)
+MIN_SOLVE_BUDGET_S = 1e-3
+
+
+def _left(deadline: float) -> float:
+    """Seconds left before a ``time.perf_counter`` deadline (negative: past it)."""
+    return deadline - time.perf_counter()
+
+
 @dataclass
 class _Attempt:
     """One solve and its assessment."""
@@ -40,7 +50,7 @@ class _Attempt:
     sol: Solution
     problem: Problem
     verdict: Assessment
-    failed_rungs: tuple = ()   # "rung k: why" of ladder rungs whose solve raised
+    failed_rungs: tuple = ()   # "rung k: why" of ladder rungs that raised or were not tried
 
 
 class GuidancePlanner:
@@ -124,44 +134,56 @@ class GuidancePlanner:
         rung = self._rung_for(start.U) if warm else 0
         problem = self._rated(shifted.problem, rung)
         t0 = time.perf_counter()
+        deadline = t0 + self.time_budget_s   # one budget for the whole re-plan, ladder included
         try:
-            best = self._solve(problem, start, opts)
+            best = self._solve(problem, start, opts, deadline)
         except Exception as exc:  # a solver fault must never take the plan down
             return ReplanOutcome(False, Level.ERROR, f"solver raised {type(exc).__name__}: "
                                  f"{exc}", request_id, time.perf_counter() - t0, None,
                                  warm_start=warm, code=Code.SOLVER_FAILED)
-        best = self._climb(best, rung, start.U, opts)
+        best = self._climb(best, rung, start.U, opts, deadline)
         return self._adopt(best, shifted.problem, start.U, warm, stamp_s, request_id,
                            time.perf_counter() - t0)
 
-    def _solve(self, problem: Problem, start: WarmStart, opts) -> _Attempt:
+    def _solve(self, problem: Problem, start: WarmStart, opts, deadline: float) -> _Attempt:
         """Solve and assess; a polished result that is not safe (polishing an infeasible
         problem can push the thrust past its bound) falls back to the unpolished DDP result,
-        which keeps the bound and minimises the terminal miss."""
-        best = self._attempt(problem, start, opts, self.config.polish)
-        if not best.verdict.safe and self.config.polish:
+        which keeps the bound and minimises the terminal miss (time permitting)."""
+        best = self._attempt(problem, start, opts, self.config.polish, deadline)
+        if not best.verdict.safe and self.config.polish and _left(deadline) > 0:
             U = best.verdict.U if np.all(np.isfinite(best.verdict.U)) else start.U
-            best = self._attempt(problem, U, opts, polish=False)
+            best = self._attempt(problem, U, opts, False, deadline)
         return best
 
-    def _attempt(self, problem: Problem, guess, opts, polish: bool) -> _Attempt:
-        """One solve of ``problem`` from ``guess`` (controls or a WarmStart), assessed."""
+    def _attempt(self, problem: Problem, guess, opts, polish: bool,
+                 deadline: float) -> _Attempt:
+        """One solve of ``problem`` from ``guess`` (controls or a WarmStart) in the time left
+        before ``deadline``, assessed."""
+        opts = opts.with_(time_budget_s=max(_left(deadline), MIN_SOLVE_BUDGET_S))
         sol = solve(problem, guess, method=self.method, fuel_optimal=None, polish=polish,
                     options=opts, case_name=self.case.name)
         return _Attempt(sol, problem, assess(sol, problem, self._feasibility_tol))
 
-    def _climb(self, best: _Attempt, rung: int, U_guess: np.ndarray, opts) -> _Attempt:
+    def _climb(self, best: _Attempt, rung: int, U_guess: np.ndarray, opts,
+               deadline: float) -> _Attempt:
         """The thrust-margin ladder: while the target is out of reach, give up the next part
         of the margin (``replan_policy``), keeping a higher rung's result only where it is
-        safe and misses less."""
+        safe and misses less. Each rung solves in what is left of the re-plan's budget; when
+        it is spent the ladder stops where it is (a re-plan answers within its budget, the
+        next one climbs from the plan it stored)."""
         while not (best.verdict.safe and best.verdict.feasible) and \
                 rung + 1 < len(self.rated_problems):
+            if _left(deadline) <= 0:
+                best = replace(best, failed_rungs=best.failed_rungs + (
+                    f"rung {rung + 1}: not tried, the {self.time_budget_s:.3g} s budget was "
+                    "spent",))
+                break
             rung += 1
             rated = self._rated(best.problem, rung)
             safe = best.verdict.safe
             try:
                 trial = self._attempt(rated, best.verdict.U if safe else U_guess, opts,
-                                      self.config.polish)
+                                      self.config.polish, deadline)
             except Exception as exc:  # noqa: BLE001  a solver fault on this rung: try the next
                 best = replace(best, failed_rungs=best.failed_rungs + (
                     f"rung {rung}: {type(exc).__name__}: {exc}",))
@@ -180,7 +202,8 @@ class GuidancePlanner:
                stamp_s: float, request_id: str, dt: float) -> ReplanOutcome:
         """Store the new plan if it may replace the one in force, and say why or why not."""
         sol, v = best.sol, best.verdict
-        failed = f" (solver raised on {'; '.join(best.failed_rungs)})" if best.failed_rungs else ""
+        failed = (f" (thrust-margin ladder: {'; '.join(best.failed_rungs)})"
+                  if best.failed_rungs else "")
         if not v.safe:
             return ReplanOutcome(False, Level.ERROR, v.reason + failed, request_id, dt, None,
                                  sol.iterations, warm, Code.UNSAFE_RESULT)
@@ -204,7 +227,8 @@ class GuidancePlanner:
                                    Code.NOT_CONVERGED)
         if dt > self.time_budget_s:
             level, code = Level.WARN, Code.BUDGET_EXCEEDED
-            reason = f"solve took {dt:.3g} s, over the {self.time_budget_s:.3g} s budget"
+            reason = (f"solve took {dt:.3g} s, over the {self.time_budget_s:.3g} s budget "
+                      f"({reason})")
         return ReplanOutcome(True, level, reason, request_id, dt, plan, sol.iterations, warm,
                              code)
 

@@ -40,7 +40,7 @@ class TruthSim:
         self.errors = errors
         self.rng = np.random.default_rng(seed)
         self.x = self.case.x0.copy()        # normalised truth
-        if initial_offset_si is not None:
+        if initial_offset_si is not None and np.any(initial_offset_si):
             x_si = self.units.states_si(self.x)
             x_si[:6] += np.asarray(initial_offset_si, dtype=float)
             self.x = self.units.states_normalised(x_si)

@@ -1,6 +1,7 @@
 """ROS-free guidance logic: the warm-start shift, estimate checks, plan persistence, and the
 message conversions (message classes only, no graph)."""
 import json
+import time
 
 import numpy as np
 import pytest
@@ -9,6 +10,7 @@ from daddy_core.errors import DaddyError
 from daddy_ros.checks import InputRejected
 from daddy_ros.config import PLANS_DIR, TriggerConfig
 from daddy_ros.closed_loop import flight_steps
+from daddy_ros.plan import Code
 from daddy_ros.planner import GuidancePlanner
 from daddy_ros.self_trigger import Reason, ReplanTrigger
 from daddy_ros.shift import ARRIVAL_SPEED_SCALE_M_S, MIN_STAGE_FRACTION, MIN_STAGES_LEFT
@@ -182,6 +184,32 @@ def test_replan_gives_up_the_thrust_margin_only_as_far_as_needed():
     assert out.ok and out.level == "OK", out.reason
     new_peak = np.max(np.linalg.norm(out.plan.thrust_n, axis=1))
     assert ratings[0] * 1.001 < new_peak <= ratings[1] * 1.001
+
+
+def test_one_budget_for_the_whole_replan_ladder_included(monkeypatch):
+    """The margin ladder's rungs solve in what is left of the re-plan's budget, and are not
+    tried once it is spent: a re-plan answers within its budget (an outage campaign had
+    re-plans of 112 s on a 60 s budget, one budget per rung)."""
+    import daddy_ros.planner as planner_mod
+    budgets, real_solve = [], planner_mod.solve
+
+    def slow_solve(problem, guess, options, **kw):
+        budgets.append(options.time_budget_s)
+        sol = real_solve(problem, guess, options=options, **kw)
+        time.sleep(max(0.0, options.time_budget_s))   # spends whatever it was given
+        return sol
+
+    monkeypatch.setattr(planner_mod, "solve", slow_solve)
+    pl = GuidancePlanner("earth_mars", time_budget_s=1.0)
+    plan = pl.load_plan(PLANS_DIR / "earth_mars_fuel.json", T0_S)
+    k = 34                                       # on the derated bound (test above)
+    t = plan.epoch_s + np.sum(plan.stage_dt_s[:k])
+    s = plan.states_si[k]
+    along = plan.thrust_n[k] / np.linalg.norm(plan.thrust_n[k])
+    out = pl.replan(s[:3], s[3:6] - 5.0 * along, s[6], t, "behind", now_s=t)
+    assert len(budgets) == 1 and budgets[0] <= 1.0          # no rung after the budget
+    assert "rung 1: not tried, the 1 s budget was spent" in out.reason, out.reason
+    assert out.code is Code.BUDGET_EXCEEDED or not out.ok
 
 
 @pytest.mark.parametrize("pos_scale, vel_nan, mass, stamp, now, field", [
