@@ -26,7 +26,7 @@ import socket
 import statistics
 import time
 import traceback
-from dataclasses import MISSING, asdict, dataclass, field, fields
+from dataclasses import MISSING, asdict, dataclass, fields
 
 import numpy as np
 

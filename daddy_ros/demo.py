@@ -23,7 +23,8 @@ import numpy as np
 
 from .campaign_cli import execute
 from .campaign_executors import Executor
-from .campaign_results import Header, Results, ResultsWriter, format_summary, read_results, summarise
+from .campaign_results import (Header, Results, ResultsWriter, format_summary, read_results,
+                               summarise)
 from .campaigns import CampaignConfig, CampaignError, Guidance, Simulation, flight_record
 from .closed_loop import fly, nominal_planner
 from .plan import Level

@@ -10,7 +10,6 @@ import signal
 import subprocess
 import sys
 import time
-from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
@@ -359,6 +358,11 @@ def test_dask_local_cluster_gives_the_local_records_and_stays_on_loopback():
         assert "LocalCluster tcp://127.0.0.1:" in what
         dask = {r.seed: r for r in run_campaign(c, c.seeds, pool)}
         listening = _listening(psutil.Process())
+        # the same cluster as an existing one (--scheduler): a client of its own
+        address = what.split()[2].rstrip(",")
+        with open_executor(Executor.DASK, 1, scheduler=address) as (remote, what2):
+            assert what2 == f"Dask cluster {address}, 2 workers"
+            again = list(run_campaign(c, c.seeds[:2], remote))
     # scheduler, dashboard, 2 nannies, 2 workers: all bound to loopback
     assert len(listening) >= 6, listening
     assert {addr.ip for addr in listening} == {"127.0.0.1"}, listening
@@ -368,6 +372,7 @@ def test_dask_local_cluster_gives_the_local_records_and_stays_on_loopback():
     for s in c.seeds:
         assert _physics(dask[s]) == _physics(local[s])
     assert any(r.dispersion.outage_s for r in dask.values())
+    assert sorted(_physics(r) for r in again) == [_physics(dask[s]) for s in c.seeds[:2]]
 
 
 def test_dask_missing_says_how_to_install(monkeypatch):
