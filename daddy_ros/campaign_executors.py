@@ -29,6 +29,13 @@ INSTALL_HINT = ("--executor dask needs Dask, the campaigns extra: pip install "
                 "requirements/pins.txt -r requirements/campaigns.txt)")
 
 
+# Dask worker settings for campaigns: no statistical profiler (it samples the running task's
+# stack every 10 ms; a campaign's records carry their own timings, and a run is pure Python).
+# Its cost was within the noise of bench_campaign.py on the 2-core machine. Workers of an
+# existing cluster take their own config (DASK_DISTRIBUTED__WORKER__PROFILE__ENABLED=False).
+WORKER_CONFIG = {"distributed.worker.profile.enabled": False}
+
+
 class Executor(str, enum.Enum):
     LOCAL = "local"
     DASK = "dask"
@@ -70,10 +77,12 @@ def open_executor(kind: Executor, jobs: int, scheduler: str = ""):
                                     "(start them with `dask worker " + scheduler + "`)")
             yield client.get_executor(pure=False), f"Dask cluster {scheduler}, {n} workers"
         return
-    with distributed.LocalCluster(n_workers=jobs, threads_per_worker=1, processes=True,
-                                  host="127.0.0.1", scheduler_port=0,
-                                  dashboard_address="127.0.0.1:0", env=SINGLE_THREAD_BLAS,
-                                  silence_logs=logging.ERROR) as cluster, \
+    import dask
+    with dask.config.set(WORKER_CONFIG), \
+            distributed.LocalCluster(n_workers=jobs, threads_per_worker=1, processes=True,
+                                     host="127.0.0.1", scheduler_port=0,
+                                     dashboard_address="127.0.0.1:0", env=SINGLE_THREAD_BLAS,
+                                     silence_logs=logging.ERROR) as cluster, \
             distributed.Client(cluster) as client:
         yield (client.get_executor(pure=False),
                f"Dask LocalCluster {cluster.scheduler_address}, {jobs} workers")
