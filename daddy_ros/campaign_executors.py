@@ -29,11 +29,17 @@ INSTALL_HINT = ("--executor dask needs Dask, the campaigns extra: pip install "
                 "requirements/pins.txt -r requirements/campaigns.txt)")
 
 
-# Dask worker settings for campaigns: no statistical profiler (it samples the running task's
-# stack every 10 ms; a campaign's records carry their own timings, and a run is pure Python).
-# Its cost was within the noise of bench_campaign.py on the 2-core machine. Workers of an
-# existing cluster take their own config (DASK_DISTRIBUTED__WORKER__PROFILE__ENABLED=False).
-WORKER_CONFIG = {"distributed.worker.profile.enabled": False}
+# Dask settings for a campaign's LocalCluster. A run is ~25 s of pure Python, so the
+# cluster's periodic housekeeping is paid for in GIL hand-overs and in CPU the runs would use
+# (on the 2-core machine the scheduler and nannies in this process took 8 s of CPU per 100 s
+# of a 2-worker campaign, and the workers ~5 % more CPU per run than pool workers): the
+# event-loop tick (20 ms) and the memory and system monitors (100 / 500 ms) run less often,
+# and the statistical profiler (a stack sample of the running task every 10 ms) is off.
+# Workers of an existing cluster take their own config (README).
+WORKER_CONFIG = {"distributed.worker.profile.enabled": False,
+                 "distributed.admin.tick.interval": "1s",
+                 "distributed.worker.memory.monitor-interval": "1s",
+                 "distributed.admin.system-monitor.interval": "2s"}
 
 
 class Executor(str, enum.Enum):
