@@ -16,6 +16,7 @@ from .planner import GuidancePlanner
 from .self_trigger import Reason, ReplanTrigger
 from .sim import T0_S, TruthSim
 
+
 class DirectLink:
     """Guidance called in-process (Monte Carlo mode): the node's re-plan policy
     (``ReplanTrigger``) and planner, without the graph. With ``self_replan`` off, as in the
