@@ -65,6 +65,21 @@ def test_bad_case_fields_are_named(field, value, msg):
         case_from_dict(d)
 
 
+@pytest.mark.parametrize("element, value, msg", [
+    (0, -7000.0, r"'x0\[0\]' \(a, km\) must be > 0"),
+    (1, 1.0, r"'x0\[1\]' \(e\) must be in \[0, 1\)"),
+    (2, 180.0, r"'x0\[2\]' \(i, deg\) must be in \[0, 180\): .* retrograde equatorial"),
+    (2, -5.0, r"'x0\[2\]' \(i, deg\)"),
+    (1, 0.2, "perigee radius .* inside the Earth"),
+])
+def test_bad_orbital_elements_are_named(element, value, msg):
+    """Keplerian inputs of the Earth cases: each element checked before anything is built."""
+    d = json.loads((load_case.__globals__["CASES_DIR"] / "leo_leo.json").read_text())
+    d["x0"][element] = value
+    with pytest.raises(DaddyError, match=msg):
+        case_from_dict(d)
+
+
 def test_unknown_case_lists_known():
     with pytest.raises(DaddyError, match="halo_l2_l1"):
         load_case("no_such_case")

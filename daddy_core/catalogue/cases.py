@@ -24,6 +24,7 @@ from ..errors import DaddyError
 CASES_DIR = Path(__file__).with_name("cases")
 SYSTEMS = tuple(SYSTEM_UNITS)
 STATE_UNITS = ("normalized", "km_km_s", "keplerian_km_deg")
+EARTH_RADIUS_KM = 6378.137   # WGS-84 equatorial: a keplerian_km_deg orbit's perigee must clear it
 PROBLEM_KEYS = ("stage_cost_gain", "terminal_cost_gain", "integrator_tol")
 # a case's solver section: the paper's per-case settings (``solver.case_options``), no others
 SOLVER_KEYS = ("tol_ddp", "tol_aul", "tol_newton", "rho_max", "homotopy", "u_guess_n")
@@ -160,8 +161,18 @@ def _to_normalised(x: np.ndarray, state_units: str, units: Units, name: str) -> 
     if state_units == "km_km_s":
         return np.concatenate([x[:3] / units.lu_km, x[3:] / units.vu_km_s])
     a_km, e, i, raan, argp, nu = x
-    if not (a_km > 0 and 0 <= e < 1):
-        raise DaddyError(f"case field {name!r}: need a > 0 and 0 <= e < 1 for an orbit")
+    if not a_km > 0:
+        raise DaddyError(f"case field '{name}[0]' (a, km) must be > 0 for an orbit, got {a_km!r}")
+    if not 0 <= e < 1:
+        raise DaddyError(f"case field '{name}[1]' (e) must be in [0, 1) for an orbit (the "
+                         f"elements describe closed orbits), got {e!r}")
+    if not 0 <= i < 180:
+        raise DaddyError(f"case field '{name}[2]' (i, deg) must be in [0, 180): the equinoctial "
+                         "elements' tan(i/2) is singular for a retrograde equatorial orbit "
+                         f"(i = 180 deg), got {i!r}")
+    if a_km * (1 - e) <= EARTH_RADIUS_KM:
+        raise DaddyError(f"case field {name!r}: perigee radius a (1 - e) = {a_km * (1 - e):.1f} "
+                         f"km is inside the Earth ({EARTH_RADIUS_KM} km)")
     deg = math.pi / 180.0
     return models.keplerian_to_equinoctial(a_km / units.lu_km, e, i * deg, raan * deg, argp * deg,
                                            nu * deg)
