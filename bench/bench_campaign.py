@@ -25,9 +25,6 @@ from daddy_ros.campaign_executors import Executor, open_executor  # noqa: E402
 from daddy_ros.campaigns import (CampaignConfig, Dispersion, RunRecord, RunStatus,  # noqa: E402
                                  run_campaign)
 
-PHYSICS = ("seed", "status", "success", "miss_km", "miss_cm_s", "final_mass_kg",
-           "propellant_kg", "replans", "drift_replans", "dispersion")
-
 
 def empty_run(seed: int) -> RunRecord:
     """What a run returns, without the run: 180 latencies, a dispersion (~4 kB of JSON)."""
@@ -97,7 +94,7 @@ def main() -> int:
                   f"runs, {sum(r.success for r in recs.values())}/{len(recs)} succeeded",
                   flush=True)
         (rp, tp, up), (rd, td, ud) = out[Executor.LOCAL], out[Executor.DASK]
-        same = sum(all(getattr(rp[s], k) == getattr(rd[s], k) for k in PHYSICS) for s in rp)
+        same = sum(rp[s].outcome() == rd[s].outcome() for s in rp)
         print(f"round {rnd}: dask / pool wall {td / tp:.3f} (runs alone {ud / up:.3f}); "
               f"records identical for {same}/{len(rp)} seeds; dask overhead per run "
               f"{(ud - up) / len(rp) * args.workers * 1e3:+.0f} ms of worker time")

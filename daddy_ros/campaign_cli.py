@@ -98,20 +98,32 @@ def _cmd_run(args) -> int:
         out = args.out or f"out/campaign-{config.case}.jsonl"
         header = open_loop_header(config)
         writer = ResultsWriter.create(out, header, overwrite=args.overwrite)
+    results = run_and_report(writer, config, Executor(args.executor), args.jobs,
+                             args.scheduler)
+    if results is None:
+        return 130
+    if args.plot:
+        _plot(results, args.plot)
+    return 0
+
+
+def run_and_report(writer: ResultsWriter, config: CampaignConfig, executor: Executor,
+                   jobs: int, scheduler: str = "") -> Results | None:
+    """``execute`` with its progress on stdout, then the summary table of the whole results
+    file (closes ``writer``). Ctrl-C stops it with every finished run on disk and says how to
+    resume: None then."""
     with writer:
         try:
-            execute(writer, config, Executor(args.executor), args.jobs, args.scheduler,
+            execute(writer, config, executor, jobs, scheduler,
                     out=lambda s: print(s, flush=True))
         except KeyboardInterrupt:
             print(f"\ninterrupted: {len(writer.recorded)} runs in {writer.path}; continue with "
                   f"daddy_campaign run --resume {writer.path}", flush=True)
-            return 130
+            return None
     results = read_results(writer.path)
     print()
     print(format_summary(summarise(results), results.header))
-    if args.plot:
-        _plot(results, args.plot)
-    return 0
+    return results
 
 
 def _cmd_summary(args) -> int:
@@ -173,7 +185,7 @@ def build_parser() -> argparse.ArgumentParser:
     run.add_argument("--resume", metavar="FILE", help="continue FILE: run its seeds not yet "
                                                       "recorded")
     run.add_argument("--executor", choices=[e.value for e in Executor], default="local")
-    run.add_argument("--jobs", type=int, default=_cores(),
+    run.add_argument("--jobs", type=int, default=cores(),
                      help="worker processes (default: one per core)")
     run.add_argument("--scheduler", default="", metavar="tcp://HOST:PORT",
                      help="submit to this existing Dask cluster (with --executor dask)")
@@ -195,7 +207,8 @@ def build_parser() -> argparse.ArgumentParser:
     return ap
 
 
-def _cores() -> int:
+def cores() -> int:
+    """The cores this process may use: the default number of campaign workers."""
     import os
     return len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else (
         os.cpu_count() or 1)

@@ -12,7 +12,7 @@ from __future__ import annotations
 import json
 import math
 import statistics
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from datetime import datetime, timezone
 from pathlib import Path
 
@@ -179,7 +179,6 @@ def merge_results(paths, out, overwrite: bool = False) -> tuple[Results, int]:
                 records.append(rec)
     dropped = sum(len(r.records) for r in parts) - len(records)
     seeds = tuple(sorted(seen))
-    from dataclasses import replace
     header = replace(first.header, config=replace(first.header.config, seeds=seeds))
     with ResultsWriter.create(out, header, overwrite=overwrite) as w:
         for rec in records:

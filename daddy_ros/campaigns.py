@@ -20,6 +20,7 @@ from __future__ import annotations
 
 import concurrent.futures
 import enum
+import json
 import math
 import os
 import socket
@@ -27,13 +28,16 @@ import statistics
 import time
 import traceback
 from dataclasses import MISSING, asdict, dataclass, fields
+from pathlib import Path
 
 import numpy as np
 
+from daddy_core.catalogue import load_case
+from daddy_core.dynamics.units import CARTESIAN_SYSTEMS
 from daddy_core.errors import DaddyError
 
 from .config import TriggerConfig, option
-from .sim import T0_S, Errors
+from .sim import T0_S, Errors, TruthSim
 
 
 class CampaignError(DaddyError):
@@ -188,8 +192,6 @@ class CampaignConfig:
 def load_config(path) -> CampaignConfig:
     """A campaign file: JSON (``.json``) or YAML (``.yaml``/``.yml``, PyYAML: installed with
     ROS 2 and with the campaigns extra)."""
-    import json
-    from pathlib import Path
     p = Path(path)
     try:
         text = p.read_text()
@@ -283,8 +285,6 @@ def _seeds_to_data(seeds: tuple):
 def check_case(name, where: str) -> None:
     """A catalogue case (or case file) the truth simulator can fly: Cartesian states with a
     spacecraft."""
-    from daddy_core.catalogue import load_case
-    from daddy_core.dynamics.units import CARTESIAN_SYSTEMS
     if not isinstance(name, str):
         raise CampaignError(f"{where}: must be a case name, got {name!r}")
     try:
@@ -358,6 +358,13 @@ class RunRecord:
     dispersion: Dispersion | None = None
     error: str = ""
     worker: str = ""                       # host:pid that ran it
+
+    def outcome(self) -> tuple:
+        """What the run did, without what it cost or where it ran (timings, latencies, worker):
+        equal for the same config and seed on any executor."""
+        return (self.seed, self.status, self.success, self.miss_km, self.miss_cm_s,
+                self.final_mass_kg, self.propellant_kg, self.replans, self.drift_replans,
+                self.dispersion, self.error)
 
     @property
     def latency_ms_median(self) -> float:
@@ -442,7 +449,6 @@ def run_one(config: CampaignConfig, seed: int) -> RunRecord:
     """One closed-loop transfer with this seed's draws (module docstring). Never raises for
     what happens inside the run: a failure is a record."""
     from .closed_loop import DirectLink, fly, nominal_planner
-    from .sim import TruthSim
     t_wall, t_cpu = time.perf_counter(), time.process_time()
     worker = f"{socket.gethostname()}:{os.getpid()}"
     dispersion = None

@@ -24,8 +24,7 @@ class DirectLink:
 
     def __init__(self, planner: GuidancePlanner, policy: TriggerConfig):
         self.planner = planner
-        self.trigger = (ReplanTrigger.for_planner(planner, policy) if policy.self_replan
-                        else None)
+        self.trigger = ReplanTrigger.for_planner(planner, policy)
 
     def estimate(self, pos, vel, mass, t_s, rid):
         """An estimate, as the node takes it: (reason, level, latency s) of the re-plan it

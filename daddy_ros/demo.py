@@ -21,10 +21,9 @@ from pathlib import Path
 
 import numpy as np
 
-from .campaign_cli import execute
+from .campaign_cli import cores, run_and_report
 from .campaign_executors import Executor
-from .campaign_results import (Header, Results, ResultsWriter, format_summary, read_results,
-                               summarise)
+from .campaign_results import Header, Results, ResultsWriter, format_summary, summarise
 from .campaigns import CampaignConfig, CampaignError, Guidance, Simulation, flight_record
 from .closed_loop import fly, nominal_planner
 from .plan import Level
@@ -145,7 +144,7 @@ def main(argv=None) -> int:
     ap.add_argument("--case", default="halo_l2_l1", choices=["halo_l2_l1", "earth_mars", "dro_dro"])
     ap.add_argument("--runs", type=int, default=0, help="Monte Carlo runs without the ROS graph")
     ap.add_argument("--seed", type=int, default=1)
-    ap.add_argument("--jobs", type=int, default=os.cpu_count() or 1,
+    ap.add_argument("--jobs", type=int, default=cores(),
                     help="Monte Carlo runs in parallel worker processes (default: one per core)")
     policy, sim_defaults = Guidance(), Simulation()   # the node's and the campaigns' defaults
     ap.add_argument("--replan-every", type=int, default=policy.replan_every_stages,
@@ -191,12 +190,9 @@ def main(argv=None) -> int:
     header = Header(config, m_open, planner.case.spacecraft.wet_mass_kg)
     print(f"open-loop optimum: final mass {m_open:.3f} kg", flush=True)
     if args.runs:
-        with ResultsWriter.create(args.results, header, overwrite=True) as writer:
-            execute(writer, config, Executor.LOCAL, args.jobs,
-                    out=lambda line: print(line, flush=True))
-        results = read_results(args.results)
-        print(format_summary(summarise(results), results.header))
-        return 0
+        writer = ResultsWriter.create(args.results, header, overwrite=True)
+        results = run_and_report(writer, config, Executor.LOCAL, args.jobs)
+        return 0 if results is not None else 130
     return _ros_demo(args, config, planner, header)
 
 

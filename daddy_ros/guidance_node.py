@@ -168,8 +168,7 @@ class GuidanceNode(LifecycleNode):
             return TransitionCallbackReturn.FAILURE
         cfg = NodeConfig(**{f: g(f) for f in NodeConfig.__dataclass_fields__})
         policy = TriggerConfig(**{f: g(f) for f in TriggerConfig.__dataclass_fields__})
-        self.trigger = (ReplanTrigger.for_planner(self.planner, policy) if policy.self_replan
-                        else None)
+        self.trigger = ReplanTrigger.for_planner(self.planner, policy)
         self.frame_id = cfg.frame_id
         self.plan_file = cfg.plan_file or self._bundled_plan()
         self.persist_file = cfg.persist_file

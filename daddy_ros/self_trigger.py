@@ -71,9 +71,13 @@ class ReplanTrigger:
         self._last = None     # time of the last estimate observed
 
     @classmethod
-    def for_planner(cls, planner, settings: TriggerConfig) -> "ReplanTrigger":
+    def for_planner(cls, planner, settings: TriggerConfig) -> "ReplanTrigger | None":
         """The policy for a ``GuidancePlanner``'s transfer: its scenario and nominal stage grid
-        (the base problem's N stages of equal length)."""
+        (the base problem's N stages of equal length); None with ``self_replan`` off (nothing
+        re-plans by itself: the node serves requests only, an in-process loop flies open
+        loop)."""
+        if not settings.self_replan:
+            return None
         base = planner.base_problem
         return cls(planner.case, settings, float(planner.units.time_s(base.stage_dt[0])),
                    base.N)

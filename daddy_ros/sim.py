@@ -36,7 +36,6 @@ class TruthSim:
         event; guidance is not told). The errors' random stream depends on ``seed`` only."""
         self.case = load_case(case_name)
         self.units = self.case.units
-        self.rhs = self.case.rhs()
         self.errors = errors
         self.rng = np.random.default_rng(seed)
         self.x = self.case.x0.copy()        # normalised truth

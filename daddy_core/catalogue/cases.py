@@ -18,13 +18,12 @@ from pathlib import Path
 import numpy as np
 
 from ..dynamics import models
-from ..dynamics.units import DAY_S, SYSTEM_UNITS, Spacecraft, Units
+from ..dynamics.units import DAY_S, EARTH_RADIUS_KM, SYSTEM_UNITS, Spacecraft, Units
 from ..errors import DaddyError
 
 CASES_DIR = Path(__file__).with_name("cases")
 SYSTEMS = tuple(SYSTEM_UNITS)
 STATE_UNITS = ("normalized", "km_km_s", "keplerian_km_deg")
-EARTH_RADIUS_KM = 6378.137   # WGS-84 equatorial: a keplerian_km_deg orbit's perigee must clear it
 PROBLEM_KEYS = ("stage_cost_gain", "terminal_cost_gain", "integrator_tol")
 # a case's solver section: the paper's per-case settings (``solver.case_options``), no others
 SOLVER_KEYS = ("tol_ddp", "tol_aul", "tol_newton", "rho_max", "homotopy", "u_guess_n")
