@@ -179,6 +179,8 @@ def rk78(rhs, x, u, t0, dt, tol: float = 1e-13, h0=None, max_steps: int = 10_000
     direction = np.where(dt >= 0, 1.0, -1.0)
     h = np.abs(dt) / 8.0 if h0 is None else np.broadcast_to(np.abs(np.asarray(h0, float)), batch).copy()
     h = np.where(h > 0, h, 1.0)
+    if dyn.max_step is not None:
+        h = np.minimum(h, dyn.max_step)
     n_steps = 0
     arrived = _Arrived(x) if len(batch) == 1 else None
     while True:
@@ -213,6 +215,8 @@ def rk78(rhs, x, u, t0, dt, tol: float = 1e-13, h0=None, max_steps: int = 10_000
         fac = np.clip(fac, 0.2, 5.0)
         h = np.where(active, np.abs(hs) * fac, h)
         h = np.where(h > 0, h, np.abs(dt) / 8.0 + 1e-300)
+        if dyn.max_step is not None:
+            h = np.minimum(h, dyn.max_step)
     if stats is not None:
         stats["steps"] = n_steps
         stats["rhs_calls"] = 13 * n_steps
@@ -350,6 +354,8 @@ def _rk78_single(dyn: Dynamics, x, u, t0, dt, tol, h0, max_steps, stats):
     h = abs(dt) / 8.0 if h0 is None else abs(float(h0))
     if h == 0.0:
         return np.array(x)
+    h_max = math.inf if dyn.max_step is None else dyn.max_step
+    h = min(h, h_max)
     n_steps = 0
     while abs(t_end - t) > 1e-15 * max(1.0, abs(t_end)):
         n_steps += 1
@@ -367,7 +373,7 @@ def _rk78_single(dyn: Dynamics, x, u, t0, dt, tol, h0, max_steps, stats):
         if err <= tol:
             x = x_new
             t += hs
-        h = abs(hs) * min(5.0, max(0.2, 0.8 * (tol / max(err, 1e-300)) ** 0.125))
+        h = min(h_max, abs(hs) * min(5.0, max(0.2, 0.8 * (tol / max(err, 1e-300)) ** 0.125)))
     if stats is not None:
         stats["steps"] = n_steps
         stats["rhs_calls"] = 13 * n_steps

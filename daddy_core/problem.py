@@ -12,7 +12,9 @@ The stage cost also receives ``hom = (h, delta)``, the fuel homotopy weight and 
 """
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass, field, replace
+from functools import cached_property
 from typing import Callable, Optional
 
 import numpy as np
@@ -26,34 +28,38 @@ from .integrators import rk4, rk78
 
 
 class StageStep:
-    """The stage map f(x, u, dt) -> next state, batched (x (nx, B), u (nu, B), dt (B,)), on
-    floats or DA: what the solver relies on, with the two ways it evaluates a step.
+    """The stage map f(x, u, dt, t0) -> next state, batched (x (nx, B), u (nu, B), dt (B,) the
+    stage lengths, t0 (B,) or a float the values of the independent variable where the stages
+    start), on floats or DA: what the solver relies on, with the two ways it evaluates a step.
 
-    Wraps a plain function (``Problem`` wraps any callable given as ``step``); ``FlowStep``
-    integrates a continuous right-hand side and serves both ways faster.
+    Wraps a plain function f(x, u, dt) of an autonomous system (``Problem`` wraps any callable
+    given as ``step``; it does not see t0); ``FlowStep`` integrates a continuous right-hand side
+    rhs(t, x, u) from t0 and serves both ways faster. The stage start matters where the
+    dynamics depend on the independent variable, e.g. the true longitude of Sundman-transformed
+    Earth-centred stages (``models.equinoctial_sundman``).
     """
 
     def __init__(self, fn: Callable):
         self.fn = fn
 
-    def __call__(self, x, u, dt):
+    def __call__(self, x, u, dt, t0=0.0):
         return self.fn(x, u, dt)
 
-    def flow(self, x: np.ndarray, u: np.ndarray, dt: float) -> np.ndarray:
-        """One float state (nx,) after a stage of duration dt under u (nu,)."""
-        return self(x[:, None], u[:, None], np.array([dt]))[:, 0]
+    def flow(self, x: np.ndarray, u: np.ndarray, dt: float, t0: float = 0.0) -> np.ndarray:
+        """One float state (nx,) after a stage of length dt from t0 under u (nu,)."""
+        return self(x[:, None], u[:, None], np.array([dt]), t0)[:, 0]
 
-    def expand(self, x: DA, u: DA, dt: np.ndarray, values: np.ndarray) -> DA:
+    def expand(self, x: DA, u: DA, dt: np.ndarray, values: np.ndarray, t0=0.0) -> DA:
         """The DA expansion at (x, u) whose constant part is ``values`` (nx, B): the flows the
         caller has integrated already (a forward pass, Newton's residual)."""
-        F = self(x, u, dt)
+        F = self(x, u, dt, t0)
         F.c[0] = values
         return F
 
-    def probe(self, x: DA, u: DA, dt: np.ndarray):
+    def probe(self, x: DA, u: DA, dt: np.ndarray, t0=0.0):
         """The user code behind the step evaluated once on DA (x (nx, B), u (nu, B)): shows
         whether it runs on DA and returns (nx, B) (``Problem.check_guess``)."""
-        return self(x, u, dt)
+        return self(x, u, dt, t0)
 
 
 class FlowStep(StageStep):
@@ -67,33 +73,33 @@ class FlowStep(StageStep):
         self.rhs, self.integrator, self.tol, self.rk4_steps = rhs, integrator, tol, rk4_steps
         self.derivative_tol = tol if derivative_tol is None else max(tol, float(derivative_tol))
 
-    def __call__(self, x, u, dt):
+    def __call__(self, x, u, dt, t0=0.0):
         if self.integrator == "rk4":
-            return rk4(self.rhs, x, u, 0.0, dt, steps=self.rk4_steps)
+            return rk4(self.rhs, x, u, t0, dt, steps=self.rk4_steps)
         if isinstance(x, DA) and self.derivative_tol > self.tol:
-            return self._expand_rk78(x, u, dt, None)
+            return self._expand_rk78(x, u, dt, None, t0)
         # every integration first tries the whole stage (h0 = dt): most stages need one step
-        return rk78(self.rhs, x, u, 0.0, dt, tol=self.tol, h0=dt)
+        return rk78(self.rhs, x, u, t0, dt, tol=self.tol, h0=dt)
 
-    def probe(self, x, u, dt):
+    def probe(self, x, u, dt, t0=0.0):
         # the integrators are ours: the user code is the right-hand side, one call is enough
-        return self.rhs(0.0, x, u)
+        return self.rhs(t0, x, u)
 
-    def flow(self, x, u, dt):
+    def flow(self, x, u, dt, t0=0.0):
         if self.integrator == "rk4":
-            return super().flow(x, u, dt)
-        return rk78(self.rhs, x, u, 0.0, dt, tol=self.tol, h0=dt)   # the single-state path
+            return super().flow(x, u, dt, t0)
+        return rk78(self.rhs, x, u, t0, dt, tol=self.tol, h0=dt)   # the single-state path
 
-    def expand(self, x, u, dt, values):
+    def expand(self, x, u, dt, values, t0=0.0):
         if self.integrator == "rk4":
-            return super().expand(x, u, dt, values)
-        return self._expand_rk78(x, u, dt, values)
+            return super().expand(x, u, dt, values, t0)
+        return self._expand_rk78(x, u, dt, values, t0)
 
-    def _expand_rk78(self, x: DA, u, dt, values):
+    def _expand_rk78(self, x: DA, u, dt, values, t0):
         """Derivatives from an RK78 run at ``derivative_tol``, the constant part -- the flow
         itself -- at ``tol`` (or ``values`` as they are)."""
-        F = rk78(self.rhs, x, u, 0.0, dt, tol=self.derivative_tol, h0=dt)
-        F.c[0] = rk78(self.rhs, x.cons, dm.cons(u), 0.0, dt, tol=self.tol, h0=dt) \
+        F = rk78(self.rhs, x, u, t0, dt, tol=self.derivative_tol, h0=dt)
+        F.c[0] = rk78(self.rhs, x.cons, dm.cons(u), t0, dt, tol=self.tol, h0=dt) \
             if values is None else values
         return F
 
@@ -105,7 +111,8 @@ class Problem:
     Attributes:
         name: label used in reports.
         x0: (nx,) initial state; x_target: (nx,) target state.
-        stage_dt: (N,) stage durations (normalised time).
+        stage_dt: (N,) stage lengths in the independent variable: durations (normalised time),
+            or angles for Sundman-transformed stages.
         step: f(x, u, dt) -> next state, the flow over one stage (float or DA, batched): a
             ``StageStep`` (``flow_step`` builds one from a right-hand side) or a plain function.
         stage_cost: l(x, u, dt, hom) -> (B,).
@@ -115,6 +122,11 @@ class Problem:
         units: normalisation units (SI at the boundary); spacecraft: for mass reporting or None.
         u_max: thrust bound in normalised units (None if unbounded); reported and checked.
         mass_index: index of the mass in the state, or None.
+        t_start: the independent variable where stage 0 starts (0 for autonomous dynamics;
+            the true longitude of x0 for Sundman-transformed stages); stage k starts at
+            ``stage_t0[k]`` = t_start + the lengths of the stages before it.
+        time_index: index of the physical time in the state when the independent variable is
+            not time (Sundman-transformed stages), else None.
     """
 
     name: str
@@ -134,6 +146,8 @@ class Problem:
     u_max: Optional[float] = None
     mass_index: Optional[int] = None
     rhs: Optional[Dynamics] = None  # continuous dynamics, for re-propagation checks
+    t_start: float = 0.0
+    time_index: Optional[int] = None
 
     def __post_init__(self):
         x0 = np.asarray(self.x0, dtype=float)
@@ -154,6 +168,8 @@ class Problem:
         object.__setattr__(self, "x0", x0)
         object.__setattr__(self, "x_target", xt)
         object.__setattr__(self, "stage_dt", dt)
+        if not math.isfinite(self.t_start):
+            raise DaddyError(f"problem.t_start must be finite, got {self.t_start!r}")
         if not isinstance(self.step, StageStep):
             if not callable(self.step):
                 raise DaddyError(f"problem.step must be callable, got {self.step!r}")
@@ -169,10 +185,20 @@ class Problem:
     def N(self) -> int:
         return self.stage_dt.size
 
-    def with_x0(self, x0, stage_dt=None) -> "Problem":
-        """A copy starting from another state (and optionally other stage durations)."""
+    @cached_property
+    def stage_t0(self) -> np.ndarray:
+        """(N,) the independent variable where each stage starts: t_start + the lengths of the
+        stages before it."""
+        t0 = np.empty_like(self.stage_dt)
+        t0[0] = 0.0
+        np.cumsum(self.stage_dt[:-1], out=t0[1:])
+        return t0 + self.t_start
+
+    def with_x0(self, x0, stage_dt=None, t_start=None) -> "Problem":
+        """A copy starting from another state (and optionally other stage lengths and start)."""
         return replace(self, x0=np.asarray(x0, float),
-                       stage_dt=self.stage_dt if stage_dt is None else np.asarray(stage_dt, float))
+                       stage_dt=self.stage_dt if stage_dt is None else np.asarray(stage_dt, float),
+                       t_start=self.t_start if t_start is None else float(t_start))
 
     # -- batched evaluation helpers (floats or DA) ------------------------------------------
     def path_constraints(self, x, u, dt):
@@ -209,16 +235,22 @@ class Problem:
             X[k + 1] = self.stage_flow(X[k], U[k], k)
         return X
 
+    def stage_flows(self, X: np.ndarray, U: np.ndarray) -> np.ndarray:
+        """(nx, N) the flow of every stage k from X[k] under U[k] (X (N or N+1, nx), U (N, nu)),
+        in one batched float call."""
+        return self.step(X[:self.N].T, U.T, self.stage_dt, self.stage_t0)
+
     def stage_flow(self, x: np.ndarray, u: np.ndarray, k: int) -> np.ndarray:
         """State (nx,) after stage k from x (nx,) under u (nu,), in floats."""
-        return self.step.flow(x, u, float(self.stage_dt[k]))
+        return self.step.flow(x, u, float(self.stage_dt[k]), float(self.stage_t0[k]))
 
     def probe_point(self, U0: np.ndarray):
-        """(x (nx, 2), u (nu, 2), dt (2,)): x0 with the controls and durations of the first two
-        stages (the only one twice when N = 1), a batch of two for cheap evaluations of the
-        problem functions on floats."""
+        """(x (nx, 2), u (nu, 2), dt (2,), t0 (2,)): x0 with the controls, lengths and starts of
+        the first two stages (the only one twice when N = 1), a batch of two for cheap
+        evaluations of the problem functions on floats."""
         k = np.minimum([0, 1], self.N - 1)
-        return np.tile(self.x0[:, None], (1, 2)), np.asarray(U0, float)[k].T, self.stage_dt[k]
+        return (np.tile(self.x0[:, None], (1, 2)), np.asarray(U0, float)[k].T, self.stage_dt[k],
+                self.stage_t0[k])
 
     def check_guess(self, U0) -> np.ndarray:
         """Check the initial guess and that every problem function returns finite values of the
@@ -241,9 +273,9 @@ class Problem:
             if m <= self.spacecraft.dry_mass_kg:
                 raise DaddyError(f"x0 mass ({m:.6g} kg) must exceed the dry mass "
                                  f"({self.spacecraft.dry_mass_kg:.6g} kg)")
-        x, u, dt = self.probe_point(U0)
+        x, u, dt, t0 = self.probe_point(U0)
         checks = {
-            "step": lambda: self.step(x, u, dt),
+            "step": lambda: self.step(x, u, dt, t0),
             "stage_cost": lambda: self.stage_cost(x, u, dt, (0.0, 1.0)),
             "path constraints": lambda: self.path_constraints(x, u, dt)[0],
             "terminal_cost": lambda: self.terminal_cost(self.x0, self.x_target),
@@ -275,10 +307,10 @@ class Problem:
         fix, not later inside the solver."""
         nx = self.nx
         z = variables(np.concatenate([self.x0, u0])[:, None], order=2)
-        x, u, dt = z[:nx], z[nx:], self.stage_dt[:1]
+        x, u, dt, t0 = z[:nx], z[nx:], self.stage_dt[:1], self.stage_t0[:1]
         xn = variables(self.x0, order=2)
         xt = self.x_target
-        stage = [("step", lambda: self.step.probe(x, u, dt), (nx, 1)),
+        stage = [("step", lambda: self.step.probe(x, u, dt, t0), (nx, 1)),
                  ("stage_cost", lambda: self.stage_cost(x, u, dt, (0.0, 1.0)), (1,)),
                  ("g_ineq", self.g_ineq and (lambda: self.g_ineq(x, u, dt)), (None, 1)),
                  ("g_eq", self.g_eq and (lambda: self.g_eq(x, u, dt)), (None, 1)),

@@ -279,8 +279,7 @@ class GuidancePlanner:
         if sol.stage_maps is None:
             try:
                 problem = self.base_problem.with_x0(sol.X[0], sol.stage_dt)
-                sol.stage_maps = StageMaps.of(expand_dynamics(problem, sol.X[:-1], sol.U,
-                                                              sol.stage_dt),
+                sol.stage_maps = StageMaps.of(expand_dynamics(problem, sol.X[:-1], sol.U),
                                               sol.X, sol.U, self.policy.warm.eps_da)
             except (DaddyError, ValueError, ArithmeticError):
                 sol.stage_maps = None   # re-optimisations then roll out and expand afresh

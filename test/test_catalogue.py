@@ -8,11 +8,11 @@ from daddy_core.dynamics import Spacecraft
 from daddy_core.errors import DaddyError
 from daddy_core.catalogue import case_from_dict, list_cases, load_case
 
-EXPECTED = {  # name: (tof days, N)
+EXPECTED = {  # name: (tof days, N); Earth-centred cases: N from their revolutions (below)
     "earth_mars": (348.79, 40), "halo_l2_l1": (20, 110), "nrho_dro": (21.2, 150),
     "lyapunov_l1_l2": (12, 300), "dro_dro": (17.5, 100), "dro_dro_2rev": (33, 300),
-    "dro_dro_3rev": (52.75, 200), "leo_leo": (35, 5000), "meo_meo": (55, 2500),
-    "gto_geo": (95, 10000),
+    "dro_dro_3rev": (52.75, 200), "leo_leo": (35, 5221), "meo_meo": (55, 1199),
+    "gto_geo": (95, 4969),
 }
 
 
@@ -39,8 +39,36 @@ def test_paper_units():
     acc_norm = float(sun.thrust(0.5)) / 1.0  # per unit mass
     assert acc_norm * sun.lu_km * 1000 / sun.tu_s ** 2 == pytest.approx(acc_si)
     leo = load_case("leo_leo")
-    assert leo.x0[0] * leo.units.lu_km == pytest.approx(6778.0)
+    assert leo.x0[0] * leo.units.lu_km == pytest.approx(6778.0)    # p = a on a circular orbit
     assert np.degrees(2 * np.arctan(np.hypot(leo.x0[3], leo.x0[4]))) == pytest.approx(51.0)
+
+
+def test_earth_cases_are_staged_in_true_longitude():
+    """An Earth-centred case's stages are equal arcs of true longitude over its revolutions:
+    by default the revolutions made in the time of flight at the mean of the initial and
+    target mean motions (LEO: 5553 s and 6052 s periods over 35 days -> 522.1; the
+    independent transcription's optimum has 521.2), or the case file's; the state carries the
+    time, whose target is the time of flight."""
+    from daddy_core.catalogue import problem_from_case
+    leo = load_case("leo_leo")
+    periods_s = 2 * np.pi * np.sqrt(np.array([6778.0, 7178.0]) ** 3 / 398_600.0)
+    revs = 35 * 86400 / 2 / periods_s[0] + 35 * 86400 / 2 / periods_s[1]
+    assert leo.revolutions == pytest.approx(revs, rel=1e-9) and leo.stages == round(revs * 10)
+    assert leo.t_start == pytest.approx(np.radians(145.0))       # RAAN + argp + nu
+    assert leo.x_target[5] == pytest.approx(35.0) and leo.x0[5] == 0.0   # days (TU = 1 day)
+    prob = problem_from_case(leo, stages=100)
+    assert prob.stage_dt.sum() == pytest.approx(2 * np.pi * revs)
+    assert prob.stage_t0[0] == leo.t_start and prob.time_index == 5
+    d = json.loads((load_case.__globals__["CASES_DIR"] / "leo_leo.json").read_text())
+    d["revolutions"] = 519.2
+    c = case_from_dict(d)
+    assert c.revolutions == 519.2 and c.stages == 5192
+    for field, value, msg in (("revolutions", -1, "revolutions"),
+                              ("stages_per_revolution", 2, "stages_per_revolution")):
+        with pytest.raises(DaddyError, match=msg):
+            case_from_dict({**d, field: value})
+    with pytest.raises(DaddyError, match="'stages': Earth-centred cases are staged in true"):
+        case_from_dict({**d, "stages": 5000})
 
 
 def test_user_case_file(tmp_path):
@@ -112,8 +140,10 @@ def test_states_convert_to_si_and_back_for_every_system(name):
     si = u.states_si(c.x0)
     np.testing.assert_allclose(u.states_normalised(si), c.x0, rtol=1e-15)
     if c.system == "earth_equinoctial":
-        assert si[0] == pytest.approx(6778e3)                     # a [m] (paper Table 10 LEO)
-        np.testing.assert_array_equal(si[1:6], c.x0[1:6])          # p, q, r, s, L unchanged
+        assert si[0] == pytest.approx(6778e3)                     # p [m] (paper Table 10 LEO)
+        np.testing.assert_array_equal(si[1:5], c.x0[1:5])          # f, g, h, k unchanged
+        t = u.states_si(c.x_target)[5]
+        assert t == pytest.approx(35 * 86400.0)                    # time [s]
     else:
         assert si[0] == pytest.approx(c.x0[0] * u.lu_km * 1e3)
         assert si[3] == pytest.approx(c.x0[3] * u.lu_km * 1e3 / u.tu_s)

@@ -143,7 +143,7 @@ def test_stage_maps_roll_out_and_restore_like_integration():
     plans = pathlib.Path(__file__).parents[1] / "daddy_ros" / "plans"
     plan = Solution.from_json(plans / "earth_mars_fuel.json")
     opts = case_options(case, True)
-    maps = StageMaps.of(expand_dynamics(prob, plan.X[:-1], plan.U, prob.stage_dt), plan.X, plan.U,
+    maps = StageMaps.of(expand_dynamics(prob, plan.X[:-1], plan.U), plan.X, plan.U,
                         opts.eps_da)
     assert maps.N == prob.N and np.all(maps.radius > 0)
     X_int = prob.rollout(plan.U)

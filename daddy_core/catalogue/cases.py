@@ -7,6 +7,13 @@ systems), the stage count, the spacecraft, and two groups of settings used in th
 ``problem`` (what defines the optimal-control problem: cost gains, the integrator tolerance of
 the stage maps) and ``solver`` (how it is solved: tolerances, regularisation bound, homotopy
 steps, the initial thrust guess).
+
+Earth-centred cases (``earth_equinoctial``) are staged in the true longitude L, not in time (a
+Sundman transformation, ``models.equinoctial_sundman``): their state is [p, f, g, h, k, t, m],
+the stages are ``stages_per_revolution`` equal arcs of L over ``revolutions`` revolutions
+(optional: by default the revolutions a spacecraft makes in the time of flight at the mean of
+the initial and target mean motions), and the arrival is the target orbit (p, f, g, h, k) at
+t = ToF anywhere along it: the target's true anomaly is not used.
 """
 from __future__ import annotations
 
@@ -43,6 +50,9 @@ class Case:
         stages: number of stages N.
         problem: problem settings (stage_cost_gain, terminal_cost_gain, integrator_tol).
         solver: solver settings (tolerances, rho_max, homotopy sequence, u_guess_n, ...).
+        revolutions: Earth-centred cases: the revolutions of the transfer (the stages span
+            2 pi revolutions of true longitude); None for cases staged in time.
+        t_start: the true longitude of x0 for Earth-centred cases [rad], else 0.
     """
 
     name: str
@@ -56,6 +66,22 @@ class Case:
     stages: int
     problem: dict = field(default_factory=dict)
     solver: dict = field(default_factory=dict)
+    revolutions: float | None = None
+    t_start: float = 0.0
+
+    @property
+    def staged_in_angle(self) -> bool:
+        """The stages are arcs of true longitude (Sundman-transformed), not durations."""
+        return self.revolutions is not None
+
+    def stage_lengths(self, stages: int | None = None) -> np.ndarray:
+        """(N,) equal stage lengths: normalised durations, or angles [rad] for Earth-centred
+        cases; ``stages`` overrides N (the span -- ToF or revolutions -- stays)."""
+        N = self.stages if stages is None else int(stages)
+        if N < 1:
+            raise DaddyError(f"stages must be >= 1, got {N}")
+        span = 2 * math.pi * self.revolutions if self.staged_in_angle else self.tof
+        return np.full(N, span / N)
 
     def rhs(self) -> models.Dynamics | None:
         """Continuous right-hand side rhs(t, x, u), or None for a discrete system."""
@@ -66,7 +92,7 @@ class Case:
             return models.two_body(self.units.gm, c)
         if self.system == "earth_moon_cr3bp":
             return models.cr3bp(self.units.gm, c)
-        return models.equinoctial(self.units.gm, c)
+        return models.equinoctial_sundman(self.units.gm, c)
 
 
 def list_cases() -> list[str]:
@@ -105,9 +131,10 @@ def case_from_dict(d: dict) -> Case:
     state_units = d.get("state_units", "normalized")
     if state_units not in STATE_UNITS:
         raise DaddyError(f"case field 'state_units' must be one of {STATE_UNITS}, got {state_units!r}")
-    stages = need("stages")
-    if not (isinstance(stages, int) and stages >= 1):
-        raise DaddyError(f"case field 'stages' must be a positive integer, got {stages!r}")
+    if system != "earth_equinoctial":
+        stages = need("stages")
+        if not (isinstance(stages, int) and stages >= 1):
+            raise DaddyError(f"case field 'stages' must be a positive integer, got {stages!r}")
     moved = sorted(set(d.get("solver", {})) & set(PROBLEM_KEYS))
     if moved:
         raise DaddyError(f"case field 'solver.{moved[0]}' belongs in 'problem' (problem settings: "
@@ -134,14 +161,63 @@ def case_from_dict(d: dict) -> Case:
         if not (isinstance(tof_days, (int, float)) and tof_days > 0 and math.isfinite(tof_days)):
             raise DaddyError(f"case field 'tof_days' must be a positive number, got {tof_days!r}")
         tof = float(units.time(tof_days * DAY_S))
-        x0 = _to_normalised(x0, state_units, units, "x0")
-        xt = _to_normalised(xt, state_units, units, "x_target")
         m0 = spacecraft.wet_mass_kg / units.mu_kg
-        x0 = np.append(x0, m0)
-        xt = np.append(xt, m0)
+        if system == "earth_equinoctial":
+            return _earth_case(d, name, units, spacecraft, x0, xt, state_units, tof, m0)
+        x0 = np.append(_to_normalised(x0, state_units, units, "x0"), m0)
+        xt = np.append(_to_normalised(xt, state_units, units, "x_target"), m0)
     return Case(name=name, description=str(d.get("description", "")), system=system, units=units,
                 spacecraft=spacecraft, x0=x0, x_target=xt, tof=tof, stages=stages,
                 problem=dict(d.get("problem", {})), solver=dict(d.get("solver", {})))
+
+
+def _earth_case(d: dict, name: str, units: Units, spacecraft: Spacecraft, x0: np.ndarray,
+                xt: np.ndarray, state_units: str, tof: float, m0: float) -> Case:
+    """An Earth-centred case staged in true longitude (see the module docstring)."""
+    if "stages" in d:
+        raise DaddyError("case field 'stages': Earth-centred cases are staged in true longitude; "
+                         "give 'stages_per_revolution' (and optionally 'revolutions') instead")
+    spr = d.get("stages_per_revolution")
+    if not (isinstance(spr, int) and spr >= 4):
+        raise DaddyError(f"case field 'stages_per_revolution' must be an integer >= 4, got {spr!r}")
+    if state_units == "km_km_s":
+        raise DaddyError("case field 'state_units': Earth-centred cases take 'keplerian_km_deg' "
+                         "or 'normalized' (modified equinoctial [p, f, g, h, k, L]) states")
+    mee0, L0 = _earth_elements(x0, state_units, units, "x0")
+    mee_t, _ = _earth_elements(xt, state_units, units, "x_target")
+    revs = d.get("revolutions")
+    if revs is None:
+        revs = tof / (2 * math.pi) * 0.5 * (_mean_motion(mee0, units.gm) + _mean_motion(mee_t, units.gm))
+    elif not (isinstance(revs, (int, float)) and revs > 0 and math.isfinite(revs)):
+        raise DaddyError(f"case field 'revolutions' must be a positive number, got {revs!r}")
+    stages = max(1, round(revs * spr))
+    return Case(name=name, description=str(d.get("description", "")), system="earth_equinoctial",
+                units=units, spacecraft=spacecraft, x0=np.concatenate([mee0, [0.0, m0]]),
+                x_target=np.concatenate([mee_t, [tof, m0]]), tof=tof, stages=stages,
+                problem=dict(d.get("problem", {})), solver=dict(d.get("solver", {})),
+                revolutions=float(revs), t_start=L0)
+
+
+def _mean_motion(mee: np.ndarray, gm: float) -> float:
+    """Mean motion sqrt(gm / a^3) of the orbit of modified equinoctial elements [p, f, g, ...]."""
+    a = mee[0] / (1.0 - mee[1] ** 2 - mee[2] ** 2)
+    return math.sqrt(gm / a ** 3)
+
+
+def _earth_elements(x: np.ndarray, state_units: str, units: Units, name: str):
+    """A case file's Earth-centred state -> modified equinoctial [p, f, g, h, k] (normalised)
+    and the true longitude [rad]."""
+    if state_units == "normalized":
+        p, f, g = x[0], x[1], x[2]
+        if not (p > 0 and f * f + g * g < 1):
+            raise DaddyError(f"case field {name!r}: modified equinoctial elements need p > 0 and "
+                             f"f^2 + g^2 < 1 (a closed orbit), got {x[:3].tolist()}")
+        return np.array(x[:5], float), float(x[5])
+    _check_keplerian(x, name)
+    a_km, e, i, raan, argp, nu = x
+    deg = math.pi / 180.0
+    return models.keplerian_to_mee(a_km / units.lu_km, e, i * deg, raan * deg, argp * deg,
+                                   nu * deg)
 
 
 def _vector(v, name: str, size: int) -> np.ndarray:
@@ -159,7 +235,13 @@ def _to_normalised(x: np.ndarray, state_units: str, units: Units, name: str) -> 
         return x
     if state_units == "km_km_s":
         return np.concatenate([x[:3] / units.lu_km, x[3:] / units.vu_km_s])
-    a_km, e, i, raan, argp, nu = x
+    raise DaddyError(f"case field 'state_units': 'keplerian_km_deg' is for Earth-centred cases "
+                     f"(system 'earth_equinoctial'); this case's {name} is Cartesian")
+
+
+def _check_keplerian(x: np.ndarray, name: str) -> None:
+    """Each Keplerian element of a case file's state [a km, e, i deg, ...], named when wrong."""
+    a_km, e, i = x[:3]
     if not a_km > 0:
         raise DaddyError(f"case field '{name}[0]' (a, km) must be > 0 for an orbit, got {a_km!r}")
     if not 0 <= e < 1:
@@ -172,6 +254,3 @@ def _to_normalised(x: np.ndarray, state_units: str, units: Units, name: str) -> 
     if a_km * (1 - e) <= EARTH_RADIUS_KM:
         raise DaddyError(f"case field {name!r}: perigee radius a (1 - e) = {a_km * (1 - e):.1f} "
                          f"km is inside the Earth ({EARTH_RADIUS_KM} km)")
-    deg = math.pi / 180.0
-    return models.keplerian_to_equinoctial(a_km / units.lu_km, e, i * deg, raan * deg, argp * deg,
-                                           nu * deg)

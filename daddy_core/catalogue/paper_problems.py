@@ -12,21 +12,49 @@ from ..problem import Problem, flow_step
 from .cases import Case
 
 
-def low_thrust_costs(n_pos: int, u_max: float, dt_avg: float, stage_gain: float,
+def low_thrust_costs(residual, u_max: float, dt_avg: float, stage_gain: float,
                      terminal_gain: float):
     """Paper/reference-code costs for low-thrust transfers.
 
     Stage cost (eq. 14 with the reference's scaling): ``fuel.pseudo_huber_stage_cost`` with
     w = u dt / (dt_avg u_max), h = 0 energy-optimal, delta -> 0 fuel-optimal.
-    Terminal cost: terminal_gain / 2 * |x[:n_pos] - x_t[:n_pos]|^2.
+    Terminal cost: terminal_gain / 2 * |residual(x, x_t)|^2, the residual of the terminal
+    equality constraints (e.g. the position and velocity miss).
     """
     stage_cost = pseudo_huber_stage_cost(u_max, dt_avg, stage_gain)
 
     def terminal_cost(x, xt):
-        e = x[:n_pos] - xt[:n_pos]
+        e = residual(x, xt)
         return dm.dot(e, e) * (0.5 * terminal_gain)
 
     return stage_cost, terminal_cost
+
+
+def _cartesian_miss(x, xt):
+    """Position and velocity miss (6,) of a Cartesian state."""
+    return x[:6] - xt[:6]
+
+
+def _orbit_miss(x, xt):
+    """The miss of an Earth-centred arrival [p, f, g, h, k, t] (Sundman-transformed state): the
+    orbit's elements and the time of flight as a fraction of it (arrival anywhere on the
+    target orbit at t = ToF)."""
+    return dm.stack([x[0] - xt[0], x[1] - xt[1], x[2] - xt[2], x[3] - xt[3], x[4] - xt[4],
+                     (x[5] - xt[5]) * (1.0 / xt[5])])
+
+
+def sundman_stage_cost(stage_cost, gm: float):
+    """A stage cost written for stage durations, on stages of true longitude: the duration of a
+    stage of angle dL is taken as dL p^(3/2) / sqrt(gm), exact on a circular orbit (dt/dL =
+    r^2 / sqrt(gm p)); on an eccentric one the weighting is off by the factor (1 + e cos nu)^-2
+    of the stage, which leaves the dynamics, the mass and the constraints exact and weights
+    thrust along the orbit slightly differently than propellant does."""
+    inv_sqrt_gm = gm ** -0.5
+
+    def cost(x, u, dL, hom=(0.0, 1.0)):
+        return stage_cost(x, u, dL * (x[0] * dm.sqrt(x[0]) * inv_sqrt_gm), hom)
+
+    return cost
 
 
 def problem_from_case(case: Case, integrator: str = "rk78", integrator_tol: float | None = None,
@@ -37,10 +65,8 @@ def problem_from_case(case: Case, integrator: str = "rk78", integrator_tol: floa
     guidance a control margin); the cost scaling keeps the spacecraft's rating.
     """
     s = case.problem
-    N = case.stages if stages is None else int(stages)
-    if N < 1:
-        raise DaddyError(f"stages must be >= 1, got {N}")
-    dt = np.full(N, case.tof / N)
+    dt = case.stage_lengths(stages)
+    N = dt.size
     if case.system == "double_integrator":
         from ..dynamics.models import double_integrator_step as step
 
@@ -62,9 +88,11 @@ def problem_from_case(case: Case, integrator: str = "rk78", integrator_tol: floa
     if not u_bound > 0:
         raise DaddyError(f"max_thrust_n must be positive, got {max_thrust_n!r}")
     m_dry = sc.dry_mass_kg / units.mu_kg
-    n_pos = 5 if case.system == "earth_equinoctial" else 6
+    miss = _orbit_miss if case.staged_in_angle else _cartesian_miss
     stage_cost, terminal_cost = low_thrust_costs(
-        n_pos, u_max, case.tof / N, s.get("stage_cost_gain", 1e-2), s.get("terminal_cost_gain", 1e4))
+        miss, u_max, case.tof / N, s.get("stage_cost_gain", 1e-2), s.get("terminal_cost_gain", 1e4))
+    if case.staged_in_angle:
+        stage_cost = sundman_stage_cost(stage_cost, units.gm)
     rhs = case.rhs()
     tol = integrator_tol if integrator_tol is not None else s.get("integrator_tol", 1e-13)
 
@@ -76,5 +104,5 @@ def problem_from_case(case: Case, integrator: str = "rk78", integrator_tol: floa
     return Problem(name=case.name, x0=case.x0, x_target=case.x_target, stage_dt=dt,
                    step=flow_step(rhs, integrator, tol), stage_cost=stage_cost,
                    terminal_cost=terminal_cost, g_ineq=g_ineq,
-                   g_teq=lambda x, xt: x[:n_pos] - xt[:n_pos], units=units, spacecraft=sc,
-                   u_max=u_bound, mass_index=6, rhs=rhs)
+                   g_teq=miss, units=units, spacecraft=sc, u_max=u_bound, mass_index=6, rhs=rhs,
+                   t_start=case.t_start, time_index=5 if case.staged_in_angle else None)

@@ -12,6 +12,8 @@ propellant cost below 1e-9 kg over any catalogue transfer.
 """
 from __future__ import annotations
 
+import math
+
 import numpy as np
 
 from ..da import functions as dm
@@ -42,10 +44,20 @@ def _magnitude(u):
     return u[3] if len(u) > 3 else thrust_magnitude(u)
 
 
-def _indexed(rhs) -> Dynamics:
+def _indexed(rhs, max_step: float | None = None) -> Dynamics:
     """A right-hand side below: it reads x and u by index only, and takes the prepared
     control of ``with_thrust_magnitude``."""
-    return Dynamics(rhs, scalar_components=True, prepare_control=with_thrust_magnitude)
+    return Dynamics(rhs, scalar_components=True, prepare_control=with_thrust_magnitude,
+                    max_step=max_step)
+
+
+# The Sundman-transformed model's step bound [rad of true longitude]: one RK78 step of 2 pi / 10
+# keeps a ballistic orbit's period to round-off (~1e-15 relative) up to e = 0.3, and to 2e-6
+# at e = 0.725 (a GTO), where 2 pi / 32 is needed (measured; the time is nearly a quadrature in
+# L, which RK78's error estimate does not see: ``Dynamics.max_step``). Eccentric transfers take
+# stages of at most 2 pi / 32 from their case files; the bound keeps long integrations outside
+# a solve (checks, tests) from striding over whole orbits.
+SUNDMAN_MAX_STEP = 2 * math.pi / 10
 
 
 def double_integrator_step(x, u, dt):
@@ -127,6 +139,52 @@ def equinoctial(gm: float, exhaust_speed: float):
     return _indexed(rhs)
 
 
+def equinoctial_sundman(gm: float, exhaust_speed: float):
+    """Earth-centred Gauss equations in modified equinoctial elements with the true longitude L
+    as the independent variable (a Sundman transformation, dt = dL / Ldot): rhs(L, x, u) = dx/dL.
+
+    x = [p, f, g, h, k, t, m]: the semi-latus rectum p, f = e cos(Om + om), g = e sin(Om + om),
+    h = tan(i/2) cos Om, k = tan(i/2) sin Om (Walker et al. 1985), the time t and the mass; u =
+    thrust in the radial / transverse / normal frame. L leaves the state: an integration gives
+    it as its independent variable, a float (or a (B,) array over a batch of stages) even inside
+    a DA expansion, so its sine and cosine are float operations.
+
+    Ldot is the full rate, sqrt(gm p) (w / p)^2 + sqrt(p / gm) (h sin L - k cos L) a_n / w with
+    w = 1 + f cos L + g sin L, so L stays the true longitude under normal thrust (the Keplerian
+    term alone, as in some Sundman transformations, would make it a neighbouring angle). Equal
+    stages in L are equal arcs of the orbit: for a near-circular orbit near-equal durations
+    that one RK78 step integrates, for an eccentric one short near perigee where the dynamics
+    are fast, which equal stages in time are not.
+    """
+    inv_sqrt_gm = gm ** -0.5
+    inv_c = -1.0 / exhaust_speed
+
+    def rhs(L, x, u):
+        p, f, g, h, k, m = x[0], x[1], x[2], x[3], x[4], x[6]
+        sL, cL = dm.sin(L), dm.cos(L)
+        inv_m = 1.0 / m
+        ar, at, an = u[0] * inv_m, u[1] * inv_m, u[2] * inv_m
+        w = 1.0 + f * cL + g * sL
+        inv_w = 1.0 / w
+        sq = dm.sqrt(p) * inv_sqrt_gm     # sqrt(p / gm)
+        hk = h * sL - k * cL
+        s2 = 1.0 + h * h + k * k
+        at_w, an_w = at * inv_w, an * inv_w
+        # dt/dL = 1 / Ldot; Ldot = sqrt(gm / p^3) w^2 + sqrt(p / gm) hk a_n / w
+        tau = 1.0 / (w * w * (1.0 / (sq * p)) + sq * hk * an_w)
+        sqt = sq * tau
+        an_half = an_w * s2 * 0.5 * sqt
+        return dm.vector([
+            p * at_w * 2.0 * sqt,
+            (ar * sL + ((w + 1.0) * cL + f) * at_w - g * hk * an_w) * sqt,
+            ((w + 1.0) * sL + g) * at_w * sqt - ar * cL * sqt + f * hk * an_w * sqt,
+            an_half * cL,
+            an_half * sL,
+            tau,
+            _magnitude(u) * inv_c * tau])
+    return _indexed(rhs, SUNDMAN_MAX_STEP)
+
+
 def keplerian_to_equinoctial(a, e, i_rad, raan_rad, argp_rad, nu_rad):
     """Keplerian elements -> [a, p, q, r, s, L] (paper eq. 21), true longitude L."""
     lp = raan_rad + argp_rad
@@ -135,25 +193,56 @@ def keplerian_to_equinoctial(a, e, i_rad, raan_rad, argp_rad, nu_rad):
                      t * np.cos(raan_rad), lp + nu_rad])
 
 
-def equinoctial_to_cartesian(x, gm: float):
-    """[a, p, q, r, s, L] -> position and velocity (6,), for plotting and checks; gm in the
-    units of a (no default: in the catalogue's Earth units it is 4 pi^2, not 1)."""
-    a, p, q, r, s, L = x[:6]
-    e2 = p * p + q * q
-    sl = a * (1.0 - e2)
-    w = 1.0 + q * np.cos(L) + p * np.sin(L)
-    rad = sl / w
-    s2 = 1.0 + r * r + s * s
-    # Walker et al. modified equinoctial convention with h = s (cos), k = r (sin), f = q, g = p
-    h, k = s, r
+def keplerian_to_mee(a, e, i_rad, raan_rad, argp_rad, nu_rad):
+    """Keplerian elements -> modified equinoctial [p, f, g, h, k] (5,) and the true longitude L."""
+    lp = raan_rad + argp_rad
+    t = np.tan(i_rad / 2.0)
+    return (np.array([a * (1.0 - e * e), e * np.cos(lp), e * np.sin(lp), t * np.cos(raan_rad),
+                      t * np.sin(raan_rad)]), float(lp + nu_rad))
+
+
+def mee_to_cartesian(mee, L, gm: float) -> np.ndarray:
+    """Modified equinoctial [p, f, g, h, k] at true longitude L -> position and velocity (6,)
+    (Walker et al. 1985; Betts), in the units of p with gravitational parameter gm."""
+    p, f, g, h, k = mee[:5]
     alpha2 = h * h - k * k
+    s2 = 1.0 + h * h + k * k
     cL, sL = np.cos(L), np.sin(L)
+    rad = p / (1.0 + f * cL + g * sL)
     pos = rad / s2 * np.array([cL + alpha2 * cL + 2 * h * k * sL,
                                sL - alpha2 * sL + 2 * h * k * cL,
                                2 * (h * sL - k * cL)])
-    f, g = q, p
-    c = np.sqrt(gm / sl) / s2
+    c = np.sqrt(gm / p) / s2
     vel = -c * np.array([sL + alpha2 * sL - 2 * h * k * cL + g - 2 * f * h * k + alpha2 * g,
                          -cL + alpha2 * cL + 2 * h * k * sL - f + 2 * g * h * k + alpha2 * f,
                          -2 * (h * cL + k * sL + f * h + g * k)])
     return np.concatenate([pos, vel])
+
+
+def cartesian_to_mee(rv, gm: float):
+    """Position and velocity (6,) -> modified equinoctial [p, f, g, h, k] (5,) and the true
+    longitude L in [0, 2 pi), the inverse of ``mee_to_cartesian`` (prograde elements: singular
+    for a retrograde equatorial orbit only)."""
+    r, v = np.asarray(rv[:3], float), np.asarray(rv[3:6], float)
+    hv = np.cross(r, v)
+    hn = np.linalg.norm(hv)
+    rn = np.linalg.norm(r)
+    p = hn * hn / gm
+    hx, hy, hz = hv / hn
+    h, k = -hy / (1.0 + hz), hx / (1.0 + hz)
+    # the equinoctial frame's unit vectors
+    s2 = 1.0 + h * h + k * k
+    fhat = np.array([1.0 - k * k + h * h, 2 * k * h, -2 * k]) / s2
+    ghat = np.array([2 * k * h, 1.0 + k * k - h * h, 2 * h]) / s2
+    evec = np.cross(v, hv) / gm - r / rn
+    f, g = evec @ fhat, evec @ ghat
+    L = np.arctan2(r @ ghat, r @ fhat) % (2 * np.pi)
+    return np.array([p, f, g, h, k]), float(L)
+
+
+def equinoctial_to_cartesian(x, gm: float):
+    """[a, p, q, r, s, L] -> position and velocity (6,), for plotting and checks; gm in the
+    units of a (no default: in the catalogue's Earth units it is 4 pi^2, not 1)."""
+    a, p, q, r, s, L = x[:6]
+    # the modified elements of Walker et al.: f = q, g = p, h = s (cos), k = r (sin)
+    return mee_to_cartesian([a * (1.0 - p * p - q * q), q, p, s, r], L, gm)

@@ -27,11 +27,17 @@ class Dynamics:
         prepare_control: u -> u', applied once per integration (the control is constant over a
             stage), whose result f receives as u: what depends on the control only is then not
             recomputed at each Runge-Kutta stage (e.g. ``models.with_thrust_magnitude``).
+        max_step: the largest step RK78 may take (None: no bound beyond the interval). RK78's
+            error estimate, (k0 + k10 - k11 - k12) h 41/840, vanishes on a component whose rate
+            depends on the independent variable only -- its 7th- and 8th-order solutions then
+            coincide -- so such a component is integrated unchecked: the time of a
+            Sundman-transformed ballistic orbit (``models.equinoctial_sundman``) is one.
     """
 
     f: Callable
     scalar_components: bool = False
     prepare_control: Optional[Callable] = None
+    max_step: Optional[float] = None
 
     def __call__(self, t, x, u):
         """dx/dt with the control prepared (for callers outside the integrators): an array

@@ -25,7 +25,8 @@ EARTH_MOON_KM = 384_399.0
 # mean body radii (the guidance node's domain checks)
 EARTH_RADIUS_KM = 6378.1
 MOON_RADIUS_KM = 1737.4
-# systems whose states are Cartesian [r (3), v (3), (m)]; the equinoctial one is [a, p, q, r, s, L, m]
+# systems whose states are Cartesian [r (3), v (3), (m)]; the Earth-centred one's are modified
+# equinoctial elements, time and mass [p, f, g, h, k, t, m] (``models.equinoctial_sundman``)
 CARTESIAN_SYSTEMS = ("sun_two_body", "earth_moon_cr3bp", "double_integrator")
 
 
@@ -92,20 +93,22 @@ class Units:
     # whole states
     def states_si(self, X) -> np.ndarray:
         """Normalised states (..., nx) -> SI: Cartesian [position m, velocity m/s, mass kg];
-        equinoctial [a m, p, q, r, s, L rad, mass kg] (the elements p..L are dimensionless)."""
-        return self._convert_states(X, self.length_m, self.speed_m_s, self.mass_kg)
+        Earth-centred [p m, f, g, h, k, time s, mass kg] (f..k are dimensionless)."""
+        return self._convert_states(X, self.length_m, self.speed_m_s, self.time_s, self.mass_kg)
 
     def states_normalised(self, X_si) -> np.ndarray:
         """The inverse of ``states_si``."""
-        return self._convert_states(X_si, self.length, self.speed, self.mass)
+        return self._convert_states(X_si, self.length, self.speed, self.time, self.mass)
 
-    def _convert_states(self, X, length, speed, mass) -> np.ndarray:
+    def _convert_states(self, X, length, speed, time, mass) -> np.ndarray:
         X = np.array(X, dtype=float)
         if self.name in CARTESIAN_SYSTEMS:
             X[..., :3] = length(X[..., :3])
             X[..., 3:6] = speed(X[..., 3:6])
         else:
             X[..., 0] = length(X[..., 0])
+            if X.shape[-1] == 7:
+                X[..., 5] = time(X[..., 5])
         if X.shape[-1] == 7:
             X[..., 6] = mass(X[..., 6])
         return X

@@ -76,8 +76,7 @@ class Stages:
         self.mult = mult
         self.hom = hom
         self.eps_da = eps_da
-        self.F = F if F is not None else expand_dynamics(problem, self.X[:-1], self.U,
-                                                         problem.stage_dt)
+        self.F = F if F is not None else expand_dynamics(problem, self.X[:-1], self.U)
         self.radius = da.radius(self.F, eps_da)
         self._map_rows = None
         self._expand_costs()
@@ -390,7 +389,7 @@ def new_maps(st: Stages, trial: Trial, dyn: bool) -> da.DA:
     the expansions' constant parts (not integrated twice)."""
     X, U = trial.X, trial.U
     if not dyn:
-        return expand_dynamics(st.problem, X[:-1], U, st.problem.stage_dt, values=X[1:].T)
+        return expand_dynamics(st.problem, X[:-1], U, values=X[1:].T)
     return maps_at(st.problem, st.F, trial.dz, trial.poly, X, U, values=X[1:].T)
 
 

@@ -64,7 +64,7 @@ def homotopy_steps(problem: Problem, U0: np.ndarray, opts: SolverOptions,
     if not fuel_optimal:
         return hom[:1]
     steps = hom if (len(hom) > 1 or hom[0][0] > 0) else FUEL_HOMOTOPY
-    x, u, dt = problem.probe_point(U0)
+    x, u, dt, _ = problem.probe_point(U0)
     u = u + 1.0     # any non-zero thrust: the fuel term differs there
     first, last = (np.asarray(problem.stage_cost(x, u, dt, step), float)
                    for step in ((0.0, steps[0][1]), steps[-1]))

@@ -179,7 +179,7 @@ def _restore(problem: Problem, model: ConstraintModel, X, U, opts: SolverOptions
 def _exact_values(problem: Problem, X, U):
     """Every constraint's value at (X, U) in the rows of ``every_constraint``'s model (stage
     defects from one batched float integration) and the max violation."""
-    fx = problem.step(X[:-1].T, U.T, problem.stage_dt)                     # (nx, N)
+    fx = problem.stage_flows(X, U)                                          # (nx, N)
     g, ni, gt, nti = problem.constraint_values(X, U)
     h = X[1:].T - fx
     stages = h if g is None else np.vstack([np.asarray(g, float), h])

@@ -80,7 +80,7 @@ class ConstraintModel:
         p = self.p = problem
         self.X, self.U = X, U
         nx, N = p.nx, p.N
-        self.F = expand_dynamics(p, X[:-1], U, p.stage_dt) if F is None else F   # (nx, N)
+        self.F = expand_dynamics(p, X[:-1], U) if F is None else F   # (nx, N)
         z = da.variables(np.concatenate([X[:-1].T, U.T]), order=2)
         g, ni = p.path_constraints(z[:nx], z[nx:], p.stage_dt)
         self.G, self.n_ineq = g, ni
@@ -231,7 +231,7 @@ def _float_residual(problem: Problem, X, U, active_tol: float):
     the iterate's infeasibility: the largest stage defect or constraint violation (an inequality
     counts by max(g, 0): Newton drives the near-active ones to g = 0, feasibility does not need
     it)."""
-    fx = problem.step(X[:-1].T, U.T, problem.stage_dt)                     # (nx, N)
+    fx = problem.stage_flows(X, U)                                          # (nx, N)
     defect = float(np.max(np.abs(X[1:].T - fx)))
     active, infeasible = [defect], [defect]
     g, ni, gt, nti = problem.constraint_values(X, U)
@@ -253,7 +253,7 @@ def exact_valued_maps(problem: Problem, maps: StageMaps | None, X, U, fx,
     ``fx``, so the model's residual at Y is exact and only its derivatives carry the
     re-centring's truncation error.
     """
-    F = expand_dynamics(problem, X[:-1], U, problem.stage_dt, values=fx) if maps is None \
+    F = expand_dynamics(problem, X[:-1], U, values=fx) if maps is None \
         else maps.at(problem, X, U, values=fx, reach=reach)   # a new DA either way
     F.c[0] = fx
     return F

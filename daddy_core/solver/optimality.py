@@ -87,7 +87,7 @@ def every_constraint(problem: Problem, X: np.ndarray, U: np.ndarray,
     """Newton's order-2 constraint model at (X, U) with every constraint in its rows (inactive
     inequalities too); the stage maps re-centred from ``maps`` where a stage lies within their
     radius (expanded elsewhere), or (None) expanded."""
-    F = expand_dynamics(problem, X[:-1], U, problem.stage_dt) if maps is None \
+    F = expand_dynamics(problem, X[:-1], U) if maps is None \
         else maps.at(problem, X, U)
     return ConstraintModel(problem, X, U, math.inf, F=F)
 

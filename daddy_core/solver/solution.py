@@ -22,7 +22,9 @@ class Solution:
 
     Attributes:
         case, method, fuel_optimal, converged, reason: what was solved and how it ended.
-        X: (N+1, nx) states; U: (N, nu) controls; stage_dt: (N,) durations.
+        X: (N+1, nx) states; U: (N, nu) controls; stage_dt: (N,) stage lengths (durations, or
+            angles for Sundman-transformed stages); t_start: where stage 0 starts in the
+            independent variable (``Problem.t_start``).
         gains_a: (N, nu), gains_b: (N, nu, nx): feedback law of the last backward sweep.
         cost: objective sum l + phi (without the augmented-Lagrangian terms).
         max_violation: max constraint violation (normalised; inequality max(g, 0), |g| else).
@@ -68,6 +70,7 @@ class Solution:
     rho: float = 0.0  # Quu regularisation at the end of the last DDP solve (warm starts resume it)
     violations: list = field(default_factory=list)   # Problem.violation_report, largest first
     kkt_residual: float | None = None   # solver.optimality (None in plans saved before it)
+    t_start: float = 0.0
     stage_maps: StageMaps | None = field(default=None, repr=False, compare=False)
 
     _ARRAYS = ("X", "U", "stage_dt", "gains_a", "gains_b")
@@ -156,13 +159,14 @@ class WarmStart:
     maps: StageMaps | None = None
 
     @classmethod
-    def of(cls, guess, stage_dt: np.ndarray, carry_rho: bool) -> "WarmStart":
+    def of(cls, guess, stage_dt: np.ndarray, carry_rho: bool, t_start: float = 0.0) -> "WarmStart":
         """A WarmStart from what ``solve`` accepts as a guess: a WarmStart, a ``Solution``
-        (its U and duals; its maps when its stage durations are ``stage_dt``; its rho with
-        ``carry_rho``) or controls."""
+        (its U and duals; its maps when its stages are the same, ``stage_dt`` from
+        ``t_start``; its rho with ``carry_rho``) or controls."""
         if isinstance(guess, WarmStart):
             return guess
         if isinstance(guess, Solution):
-            maps = guess.stage_maps if np.array_equal(guess.stage_dt, stage_dt) else None
+            same = np.array_equal(guess.stage_dt, stage_dt) and guess.t_start == t_start
+            maps = guess.stage_maps if same else None
             return cls(guess.U, guess.duals, guess.rho if carry_rho else None, maps)
         return cls(guess)

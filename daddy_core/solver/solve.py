@@ -39,7 +39,7 @@ def repropagation_miss(problem: Problem, U: np.ndarray) -> float | None:
         x = problem.x0.copy()
         try:
             for k in range(problem.N):
-                x = dop853(problem.rhs, x, U[k], 0.0, problem.stage_dt[k], rtol=1e-12,
+                x = dop853(problem.rhs, x, U[k], problem.stage_t0[k], problem.stage_dt[k], rtol=1e-12,
                            atol=1e-12)
         except DaddyError:
             return math.inf
@@ -117,7 +117,7 @@ def solve(problem: Problem, u_guess=None, method: Method | str = Method.DYN,
     """
     opts = options or SolverOptions()
     method = Method.parse(method)
-    warm = WarmStart.of(u_guess, problem.stage_dt, opts.carry_rho)
+    warm = WarmStart.of(u_guess, problem.stage_dt, opts.carry_rho, problem.t_start)
     U0 = problem.check_guess(np.full((problem.N, problem.nu), 1e-6) if warm.U is None else warm.U)
     steps = homotopy_steps(problem, U0, opts, fuel_optimal)
     if progress is None and opts.verbose:
@@ -269,7 +269,7 @@ def _assemble(problem: Problem, end: _End, hres: HomotopyResult, steps: tuple, m
     return Solution(
         case=case_name or problem.name, method=method.value,
         fuel_optimal=len(steps) > 1 or (steps[0][0] > 0), converged=converged, reason=reason,
-        X=X, U=U, stage_dt=problem.stage_dt.copy(),
+        X=X, U=U, stage_dt=problem.stage_dt.copy(), t_start=problem.t_start,
         gains_a=gains.a if gains else np.zeros((N, nu)),
         gains_b=gains.b if gains else np.zeros((N, nu, nx)),
         cost=objective(problem, X, U, steps[-1]), max_violation=gmax,

@@ -15,12 +15,14 @@ from ..errors import DaddyError
 from ..problem import Problem
 
 
-def expand_dynamics(problem: Problem, X: np.ndarray, U: np.ndarray, dt: np.ndarray,
+def expand_dynamics(problem: Problem, X: np.ndarray, U: np.ndarray, stages=slice(None),
                     values=None) -> da.DA:
     """Order-2 stage maps at (X[k], U[k]) for the given stages, in one batched call.
 
     Args:
-        X: (B, nx) stage start states; U: (B, nu) controls; dt: (B,) stage durations.
+        X: (B, nx) stage start states; U: (B, nu) controls; stages: which of the problem's
+            stages they are (an index array or a slice; every stage by default), for their
+            lengths and starts.
         values: (nx, B) the stage flows f(X[k], U[k]) when the caller has integrated them
             already (a forward pass, Newton's residual): they become the maps' constant parts
             (``StageStep.expand``, which does not integrate them again).
@@ -31,9 +33,10 @@ def expand_dynamics(problem: Problem, X: np.ndarray, U: np.ndarray, dt: np.ndarr
         raise DaddyError("expand_dynamics needs at least one stage")
     z = da.variables(np.concatenate([X.T, U.T]), order=2)
     x, u = z[:problem.nx], z[problem.nx:]
+    dt, t0 = problem.stage_dt[stages], problem.stage_t0[stages]
     if values is None:
-        return problem.step(x, u, dt)
-    return problem.step.expand(x, u, dt, values)
+        return problem.step(x, u, dt, t0)
+    return problem.step.expand(x, u, dt, values, t0)
 
 
 def maps_at(problem: Problem, F: da.DA, dz: np.ndarray, inside: np.ndarray, X: np.ndarray, U: np.ndarray,
@@ -54,13 +57,12 @@ def maps_at(problem: Problem, F: da.DA, dz: np.ndarray, inside: np.ndarray, X: n
         DA (nx, N) centred at (X[k], U[k]).
     """
     if not np.any(inside):
-        return expand_dynamics(problem, X[:problem.N], U, problem.stage_dt, values)
+        return expand_dynamics(problem, X[:problem.N], U, values=values)
     c = np.empty_like(F.c)
     idx_in, idx_out = np.flatnonzero(inside), np.flatnonzero(~inside)
     c[..., idx_in] = da.shift(F[:, idx_in], dz[:, idx_in]).c
     if idx_out.size:
-        c[..., idx_out] = expand_dynamics(problem, X[idx_out], U[idx_out],
-                                          problem.stage_dt[idx_out],
+        c[..., idx_out] = expand_dynamics(problem, X[idx_out], U[idx_out], idx_out,
                                           None if values is None else values[:, idx_out]).c
     return da.DA(c, F.T)
 
