@@ -7,9 +7,11 @@ from __future__ import annotations
 
 import argparse
 import sys
+from datetime import datetime, timezone
 
 import numpy as np
 
+from . import trajectory_output
 from .errors import DaddyError
 from .catalogue import list_cases, load_case, problem_from_case
 from .solver import METHODS, Globalization, Solution, case_options, solve
@@ -30,6 +32,12 @@ def _parser() -> argparse.ArgumentParser:
     s.add_argument("--stages", type=int, help="override the stage count N")
     s.add_argument("--json", metavar="FILE", help="write the solution as JSON")
     s.add_argument("--npz", metavar="FILE", help="write the solution as NPZ")
+    s.add_argument("--csv", metavar="FILE", help="write the trajectory as CSV (node times, SI "
+                   "states, Earth-centred cases' elements, thrust)")
+    s.add_argument("--oem", metavar="FILE", help="Earth-centred cases: write a CCSDS OEM "
+                   "(EME2000, km, km/s)")
+    s.add_argument("--epoch", type=_utc, default=None, metavar="ISO",
+                   help="start epoch of the OEM, UTC (default J2000, 2000-01-01T12:00:00)")
     s.add_argument("--plot", metavar="FILE", help="write a PNG of the trajectory and thrust "
                    "(needs matplotlib)")
     s.add_argument("--globalization", choices=[g.value for g in Globalization],
@@ -40,15 +48,28 @@ def _parser() -> argparse.ArgumentParser:
     return ap
 
 
+def _utc(text: str) -> datetime:
+    """--epoch: an ISO 8601 date-time, UTC unless it names its offset."""
+    try:
+        t = datetime.fromisoformat(text)
+    except ValueError as exc:
+        raise argparse.ArgumentTypeError(f"not an ISO 8601 date-time: {text!r}") from exc
+    return t if t.tzinfo else t.replace(tzinfo=timezone.utc)
+
+
 def main(argv=None) -> int:
     args = _parser().parse_args(argv)
     if args.command == "list":
         for name in list_cases():
             c = load_case(name)
-            print(f"{name:16s} {c.description}")
+            revs = "" if c.revolutions is None else f", {c.revolutions:.1f} revolutions"
+            print(f"{name:16s} N = {c.stages}{revs}: {c.description}")
         return 0
     try:
         case = load_case(args.case)
+        if args.oem and not case.staged_in_angle:
+            raise DaddyError(f"--oem: an OEM is for Earth-centred cases; {case.name!r} is "
+                             f"{case.system} (write --csv instead)")
         fuel = not args.energy and case.system != "double_integrator"
         if args.fuel:
             fuel = True
@@ -73,9 +94,14 @@ def main(argv=None) -> int:
         sol.to_json(args.json)
     if args.npz:
         sol.to_npz(args.npz)
+    if args.csv:
+        trajectory_output.write_csv(sol, args.csv)
+    if args.oem:
+        trajectory_output.write_oem(sol, args.oem, args.epoch or trajectory_output.J2000)
     if args.plot:
         from .plotting import plot_solution
-        plot_solution(sol, args.plot)
+        plot_solution(sol, args.plot, u_max_n=problem.u_max and float(
+            case.units.thrust_n(problem.u_max)))
     if not sol.converged:
         print(f"daddy: not converged: {sol.reason}", file=sys.stderr)
         return 1

@@ -6,13 +6,17 @@ import numpy as np
 from .errors import DaddyError
 
 
-def plot_solution(sol, path: str, flown=None) -> None:
-    """PNG with the trajectory (x-y, normalised) and the thrust magnitude against u_max.
+def plot_solution(sol, path: str, flown=None, u_max_n: float | None = None) -> None:
+    """PNG with the trajectory and the thrust magnitude against time (u_max drawn when given).
+
+    Cartesian solutions: the x-y path (normalised). Earth-centred ones (many revolutions, whose
+    path is a disc of ink): the evolution of a, e, i and RAAN over time, as the paper's Fig. 9a.
 
     Args:
         sol: a Solution.
         path: output PNG file.
         flown: optional (K, >=2) array of flown positions to overlay (closed-loop demo).
+        u_max_n: the thrust bound [N], drawn on the thrust panel.
     """
     try:
         import matplotlib
@@ -20,20 +24,34 @@ def plot_solution(sol, path: str, flown=None) -> None:
         import matplotlib.pyplot as plt
     except ImportError as exc:
         raise DaddyError("--plot needs matplotlib (pip install matplotlib)") from exc
-    fig, (ax1, ax2) = plt.subplots(1, 2, figsize=(11, 4.5))
-    X = sol.X
-    ax1.plot(X[:, 0], X[:, 1], ".-", label="planned")
-    if flown is not None:
-        ax1.plot(flown[:, 0], flown[:, 1], "-", label="flown")
-    ax1.plot(X[0, 0], X[0, 1], "go", label="start")
-    ax1.plot(X[-1, 0], X[-1, 1], "r*", label="end")
-    ax1.set_xlabel("x [LU]")
-    ax1.set_ylabel("y [LU]")
-    ax1.axis("equal")
-    ax1.legend()
-    t = np.concatenate([[0.0], np.cumsum(sol.stage_dt)]) * sol.units.get("tu_s", 1.0) / 86400
+    days = sol.times_s / 86400.0
+    if sol.elements is not None:
+        fig, axes = plt.subplots(2, 2, figsize=(11, 7))
+        (ax_a, ax_e), (ax_i, ax2) = axes
+        el = sol.elements
+        for ax, col, label in ((ax_a, 0, "a [km]"), (ax_e, 1, "e"), (ax_i, 2, "i [deg]")):
+            ax.plot(days, el[:, col])
+            ax.set_xlabel("time [day]")
+            ax.set_ylabel(label)
+        ax_o = ax_i.twinx()
+        ax_o.plot(days, np.unwrap(np.radians(el[:, 3])) * 180 / np.pi, "C1")
+        ax_o.set_ylabel("RAAN [deg]", color="C1")
+    else:
+        fig, (ax1, ax2) = plt.subplots(1, 2, figsize=(11, 4.5))
+        X = sol.X
+        ax1.plot(X[:, 0], X[:, 1], ".-", label="planned")
+        if flown is not None:
+            ax1.plot(flown[:, 0], flown[:, 1], "-", label="flown")
+        ax1.plot(X[0, 0], X[0, 1], "go", label="start")
+        ax1.plot(X[-1, 0], X[-1, 1], "r*", label="end")
+        ax1.set_xlabel("x [LU]")
+        ax1.set_ylabel("y [LU]")
+        ax1.axis("equal")
+        ax1.legend()
     thrust = np.linalg.norm(sol.thrust_n, axis=1)
-    ax2.step(t[:-1], thrust, where="post", label="|u|")
+    ax2.step(days[:-1], thrust, where="post", label="|u|")
+    if u_max_n is not None:
+        ax2.axhline(u_max_n, color="k", ls="--", lw=0.8, label="u_max")
     ax2.set_xlabel("time [day]")
     ax2.set_ylabel("thrust [N]")
     ax2.set_title(f"{sol.case} ({sol.method})")

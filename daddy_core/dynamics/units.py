@@ -116,13 +116,13 @@ class Units:
     def as_dict(self) -> dict:
         """The units as a ``Solution`` records them."""
         return {"system": self.name, "lu_km": self.lu_km, "tu_s": self.tu_s, "mu_kg": self.mu_kg,
-                "thrust_unit_n": self.thrust_unit_n}
+                "thrust_unit_n": self.thrust_unit_n, "gm": self.gm}
 
     @classmethod
     def from_dict(cls, d: dict) -> "Units":
-        """Units from ``as_dict``'s record (gm is not recorded: conversions do not need it)."""
+        """Units from ``as_dict``'s record (solutions saved before gm was recorded get 1)."""
         return cls(d.get("system", "double_integrator"), float(d.get("lu_km", 1e-3)),
-                   float(d.get("tu_s", 1.0)), float(d.get("mu_kg", 1.0)))
+                   float(d.get("tu_s", 1.0)), float(d.get("mu_kg", 1.0)), float(d.get("gm", 1.0)))
 
 
 def sun_units(mass_kg: float = 1000.0) -> Units:

@@ -9,6 +9,7 @@ from pathlib import Path
 
 import numpy as np
 
+from .. import trajectory_output
 from ..dynamics.units import Units
 from ..errors import DaddyError
 from .stage_maps import StageMaps
@@ -71,6 +72,7 @@ class Solution:
     violations: list = field(default_factory=list)   # Problem.violation_report, largest first
     kkt_residual: float | None = None   # solver.optimality (None in plans saved before it)
     t_start: float = 0.0
+    time_index: int | None = None   # Problem.time_index: the state's time when staged in angle
     stage_maps: StageMaps | None = field(default=None, repr=False, compare=False)
 
     _ARRAYS = ("X", "U", "stage_dt", "gains_a", "gains_b")
@@ -86,8 +88,24 @@ class Solution:
 
     @property
     def X_si(self) -> np.ndarray:
-        """States in SI (``Units.states_si``; JSON: ``X_SI``)."""
+        """States in SI (``Units.states_si``; JSON: ``X_SI``); for Earth-centred solutions
+        Cartesian ECI [position m, velocity m/s, mass kg], their elements in ``elements``."""
+        if trajectory_output.is_earth_centred(self):
+            return trajectory_output.earth_cartesian_si(self)
         return Units.from_dict(self.units).states_si(self.X)
+
+    @property
+    def elements(self) -> np.ndarray | None:
+        """Earth-centred solutions: (N+1, 6) Keplerian elements of the nodes [a km, e, i deg,
+        RAAN deg, argp deg, true longitude deg] (JSON: ``elements_km_deg``); else None."""
+        if trajectory_output.is_earth_centred(self):
+            return trajectory_output.earth_elements(self)
+        return None
+
+    @property
+    def times_s(self) -> np.ndarray:
+        """(N+1,) node times since the start [s] (JSON: ``times_s``)."""
+        return trajectory_output.node_times_s(self)
 
     def to_dict(self) -> dict:
         d = {f.name: copy.deepcopy(getattr(self, f.name)) for f in fields(self)
@@ -99,6 +117,9 @@ class Solution:
         if self.units.get("thrust_unit_n"):
             d["U_N"] = self.thrust_n.tolist()
             d["X_SI"] = self.X_si.tolist()
+            d["times_s"] = self.times_s.tolist()
+            if self.elements is not None:
+                d["elements_km_deg"] = self.elements.tolist()
         return d
 
     def to_json(self, path: str | Path | None = None) -> str:
@@ -127,7 +148,8 @@ class Solution:
         return cls.from_dict(json.loads(text))
 
     def to_npz(self, path: str | Path) -> None:
-        meta = {k: v for k, v in self.to_dict().items() if k not in self._ARRAYS + ("U_N", "X_SI")}
+        meta = {k: v for k, v in self.to_dict().items()
+                if k not in self._ARRAYS + ("U_N", "X_SI", "times_s", "elements_km_deg")}
         np.savez(path, meta=json.dumps(meta), **{k: getattr(self, k) for k in self._ARRAYS})
 
     @classmethod

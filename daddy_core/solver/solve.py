@@ -270,6 +270,7 @@ def _assemble(problem: Problem, end: _End, hres: HomotopyResult, steps: tuple, m
         case=case_name or problem.name, method=method.value,
         fuel_optimal=len(steps) > 1 or (steps[0][0] > 0), converged=converged, reason=reason,
         X=X, U=U, stage_dt=problem.stage_dt.copy(), t_start=problem.t_start,
+        time_index=problem.time_index,
         gains_a=gains.a if gains else np.zeros((N, nu)),
         gains_b=gains.b if gains else np.zeros((N, nu, nx)),
         cost=objective(problem, X, U, steps[-1]), max_violation=gmax,

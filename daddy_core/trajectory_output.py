@@ -1,0 +1,130 @@
+"""A solved trajectory in the forms a mission designer uses: node times, Earth-centred states as
+Cartesian ECI and as Keplerian elements, a CSV of every node for any case, and a CCSDS Orbit
+Ephemeris Message (OEM, plain text) for Earth-centred transfers.
+
+Earth-centred solutions hold modified equinoctial elements staged in true longitude
+(``models.equinoctial_sundman``): node k lies at the true longitude t_start + the stage angles
+before it, its time is the state's time component. Other solutions are staged in time and their
+states are Cartesian already.
+"""
+from __future__ import annotations
+
+import math
+from datetime import datetime, timedelta, timezone
+from pathlib import Path
+
+import numpy as np
+
+from .dynamics import models
+from .dynamics.units import Units
+from .errors import DaddyError
+
+# OEM epochs are absolute; a solution is relative to its start, which --epoch places (default
+# J2000, the reference epoch of the EME2000 frame)
+J2000 = datetime(2000, 1, 1, 12, 0, 0, tzinfo=timezone.utc)
+
+
+def is_earth_centred(sol) -> bool:
+    """The solution's states are modified equinoctial elements staged in true longitude."""
+    return sol.time_index is not None and sol.units.get("system") == "earth_equinoctial"
+
+
+def node_times_s(sol) -> np.ndarray:
+    """(N+1,) time of each node since the start [s]."""
+    units = Units.from_dict(sol.units)
+    if sol.time_index is not None:
+        return units.time_s(sol.X[:, sol.time_index] - sol.X[0, sol.time_index])
+    return units.time_s(np.concatenate([[0.0], np.cumsum(sol.stage_dt)]))
+
+
+def node_longitudes(sol) -> np.ndarray:
+    """(N+1,) true longitude of each node of an Earth-centred solution [rad]."""
+    return sol.t_start + np.concatenate([[0.0], np.cumsum(sol.stage_dt)])
+
+
+def earth_cartesian_si(sol) -> np.ndarray:
+    """(N+1, 7) Earth-centred inertial states [position m (3), velocity m/s (3), mass kg] of an
+    Earth-centred solution (the frame of its elements: x towards the line of zero right
+    ascension of the ascending node)."""
+    units = Units.from_dict(sol.units)
+    L = node_longitudes(sol)
+    rv = np.array([models.mee_to_cartesian(x[:5], l, units.gm) for x, l in zip(sol.X, L)])
+    return np.column_stack([units.length_m(rv[:, :3]), units.speed_m_s(rv[:, 3:]),
+                            units.mass_kg(sol.X[:, 6])])
+
+
+def earth_elements(sol) -> np.ndarray:
+    """(N+1, 6) Keplerian elements of an Earth-centred solution's nodes: a [km], e, i [deg],
+    RAAN [deg], argument of perigee [deg], true longitude [deg] (RAAN + argp + true anomaly;
+    the angles in [0, 360))."""
+    units = Units.from_dict(sol.units)
+    p, f, g, h, k = sol.X[:, :5].T
+    e = np.hypot(f, g)
+    a_km = p / (1.0 - e * e) * units.lu_km
+    i = 2.0 * np.arctan(np.hypot(h, k))
+    raan = np.arctan2(k, h)
+    argp = np.arctan2(g, f) - raan
+    return np.column_stack([a_km, e, np.degrees(i), np.degrees(raan) % 360.0,
+                            np.degrees(argp) % 360.0, np.degrees(node_longitudes(sol)) % 360.0])
+
+
+def csv_columns(sol) -> tuple[list[str], np.ndarray]:
+    """The CSV's header and (N+1, columns) rows: node k, time [s], the SI state, for
+    Earth-centred solutions the Keplerian elements too, then the thrust on stage k [N] and its
+    magnitude (blank, NaN, at the last node)."""
+    earth = is_earth_centred(sol)
+    t = node_times_s(sol)
+    if earth:
+        state = earth_cartesian_si(sol)
+        names = ["x_m", "y_m", "z_m", "vx_m_s", "vy_m_s", "vz_m_s", "mass_kg",
+                 "a_km", "e", "i_deg", "raan_deg", "argp_deg", "true_longitude_deg"]
+        state = np.column_stack([state, earth_elements(sol)])
+    else:
+        state = sol.X_si
+        n = state.shape[1]
+        names = (["x_m", "y_m", "z_m", "vx_m_s", "vy_m_s", "vz_m_s", "mass_kg"][:n] if n in (6, 7)
+                 else [f"x{i}" for i in range(n)])
+    thrust = np.full((sol.N + 1, sol.U.shape[1]), np.nan)
+    thrust[:-1] = sol.thrust_n
+    frame = ["u_r_n", "u_t_n", "u_n_n"] if earth else ["u_x_n", "u_y_n", "u_z_n"]
+    unames = frame if sol.U.shape[1] == 3 else [f"u{i}" for i in range(sol.U.shape[1])]
+    mag = np.append(np.linalg.norm(sol.thrust_n, axis=1), np.nan)
+    rows = np.column_stack([np.arange(sol.N + 1), t, state, thrust, mag])
+    return ["k", "time_s", *names, *unames, "thrust_n"], rows
+
+
+def write_csv(sol, path: str | Path) -> None:
+    """The trajectory as CSV (``csv_columns``; empty fields where a value does not exist)."""
+    header, rows = csv_columns(sol)
+    lines = [",".join(header)]
+    for r in rows:
+        lines.append(",".join(str(int(r[0])) if j == 0 else ("" if math.isnan(v) else repr(float(v)))
+                              for j, v in enumerate(r)))
+    Path(path).write_text("\n".join(lines) + "\n")
+
+
+def write_oem(sol, path: str | Path, epoch: datetime = J2000, object_name: str | None = None) -> None:
+    """A CCSDS OEM 2.0 (KVN) of an Earth-centred solution: one segment, EME2000, UTC, the node
+    states in km and km/s at the start epoch + the node times."""
+    if not is_earth_centred(sol):
+        raise DaddyError("an OEM is for Earth-centred solutions (system earth_equinoctial); "
+                         f"{sol.case!r} is not one: write its CSV instead")
+    if epoch.tzinfo is None:
+        epoch = epoch.replace(tzinfo=timezone.utc)
+    t = node_times_s(sol)
+    rv = earth_cartesian_si(sol)[:, :6] / 1000.0
+
+    def stamp(s: float) -> str:
+        return (epoch + timedelta(seconds=float(s))).strftime("%Y-%m-%dT%H:%M:%S.%f")
+
+    name = object_name or sol.case
+    lines = ["CCSDS_OEM_VERS = 2.0",
+             f"CREATION_DATE = {datetime.now(timezone.utc).strftime('%Y-%m-%dT%H:%M:%S')}",
+             "ORIGINATOR = daddy", "", "META_START", f"OBJECT_NAME = {name}",
+             f"OBJECT_ID = {name}", "CENTER_NAME = EARTH", "REF_FRAME = EME2000",
+             "TIME_SYSTEM = UTC", f"START_TIME = {stamp(t[0])}", f"STOP_TIME = {stamp(t[-1])}",
+             "META_STOP", "",
+             f"COMMENT {sol.method} {'fuel' if sol.fuel_optimal else 'energy'}-optimal, "
+             f"converged {sol.converged}, final mass {sol.final_mass_kg} kg"]
+    lines += [stamp(s) + " " + " ".join(f"{v: .12e}" for v in row) for s, row in zip(t, rv)]
+    Path(path).write_text("\n".join(lines) + "\n")
