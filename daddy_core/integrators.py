@@ -174,8 +174,11 @@ def rk78(rhs, x, u, t0, dt, tol: float = 1e-13, h0=None, max_steps: int = 10_000
     dt = np.broadcast_to(np.asarray(dt, dtype=float), batch).copy()
     if not np.all(np.isfinite(dt)):
         raise DaddyError("rk78 interval dt contains NaN or inf")
-    t = np.broadcast_to(np.asarray(t0, dtype=float), batch).copy()
-    t_end = t + dt
+    # steps are controlled in the time since the interval's start (from 0, as for an autonomous
+    # system: the same steps whatever t0); the rhs sees t0 + that time
+    base = np.broadcast_to(np.asarray(t0, dtype=float), batch).copy()
+    t = np.zeros(batch)
+    t_end = dt.copy()
     direction = np.where(dt >= 0, 1.0, -1.0)
     h = np.abs(dt) / 8.0 if h0 is None else np.broadcast_to(np.abs(np.asarray(h0, float)), batch).copy()
     h = np.where(h > 0, h, 1.0)
@@ -191,15 +194,15 @@ def rk78(rhs, x, u, t0, dt, tol: float = 1e-13, h0=None, max_steps: int = 10_000
         if arrived is not None and active.sum() <= _COMPACT_SHARE * active.size:
             keep = np.flatnonzero(active)
             x, u = arrived.leave(x, u, keep)
-            t, t_end, direction, h, dt, active, remaining = (
-                v[keep] for v in (t, t_end, direction, h, dt, active, remaining))
+            t, t_end, base, direction, h, dt, active, remaining = (
+                v[keep] for v in (t, t_end, base, direction, h, dt, active, remaining))
         n_steps += 1
         if n_steps > max_steps:
             raise DaddyError(f"rk78 exceeded max_steps={max_steps} (stiff or singular dynamics?)")
         hs = np.where(active, np.minimum(h, remaining), 0.0) * direction
         st = _Stages(x, 13)
         for i in range(13):
-            st.push(rhs(t + RK78_C[i] * hs, st.combine(st.raw, hs, RK78_A[i]), u))
+            st.push(rhs(base + t + RK78_C[i] * hs, st.combine(st.raw, hs, RK78_A[i]), u))
         x_new = st.combine(st.raw, hs, RK78_B)
         kb = st.constant_parts()
         err_vec = (kb[0] + kb[10] - kb[11] - kb[12]) * (RK78_ERR * hs)
@@ -349,7 +352,7 @@ def _rk78_single(dyn: Dynamics, x, u, t0, dt, tol, h0, max_steps, stats):
     arrays, as documented for ``rk78``. ``u`` is prepared already."""
     rhs, state, uu, x = _plain_float_args(dyn, x, u)
     step = _single_step(len(x))
-    t, t_end = t0, t0 + dt
+    t, t_end = 0.0, dt   # controlled from 0, as in the batched path; the rhs sees t0 + t
     direction = 1.0 if dt >= 0 else -1.0
     h = abs(dt) / 8.0 if h0 is None else abs(float(h0))
     if h == 0.0:
@@ -363,9 +366,9 @@ def _rk78_single(dyn: Dynamics, x, u, t0, dt, tol, h0, max_steps, stats):
             raise DaddyError(f"rk78 exceeded max_steps={max_steps} (stiff or singular dynamics?)")
         hs = min(h, abs(t_end - t)) * direction
         try:
-            x_new, err = step(rhs, state, t, x, uu, hs)
+            x_new, err = step(rhs, state, t0 + t, x, uu, hs)
         except ValueError as exc:   # the rhs's own error, or it returned the wrong length
-            n_out = np.size(rhs(t, state(x), uu))
+            n_out = np.size(rhs(t0 + t, state(x), uu))
             if n_out != len(x):
                 raise DaddyError(f"rk78: rhs returned {n_out} components for a state of "
                                  f"{len(x)} components") from exc
@@ -448,11 +451,11 @@ def dop853(rhs, x, u, t0, dt, rtol: float = 1e-12, atol: float = 1e-12, first_st
     dyn = as_dynamics(rhs)
     rhs, state, uu, x = _plain_float_args(dyn, x, dyn.prepared(u))
     t0, dt = float(t0), float(dt)
-    t, t_end = t0, t0 + dt
+    t, t_end = 0.0, dt   # steps controlled from 0 (as rk78's); the rhs sees t0 + t
     direction = 1.0 if dt >= 0 else -1.0
     h_abs = abs(dt) if first_step is None else abs(float(first_step))
     step = _dop853_step(len(x))
-    f = _float_list(rhs(t, state(x), uu))
+    f = _float_list(rhs(t0, state(x), uu))
     if len(f) != len(x):
         raise DaddyError(f"dop853: rhs returned {len(f)} components for a state of {len(x)}")
     accepted = rejected_total = 0
@@ -462,14 +465,14 @@ def dop853(rhs, x, u, t0, dt, rtol: float = 1e-12, atol: float = 1e-12, first_st
             if accepted + rejected_total >= max_steps:
                 raise DaddyError(f"dop853 exceeded max_steps={max_steps}")
             if h_abs < 10 * abs(math.nextafter(t, direction * math.inf) - t):
-                raise DaddyError(f"dop853: step size below round-off at t = {t!r} (NaN or inf "
+                raise DaddyError(f"dop853: step size below round-off at t = {t0 + t!r} (NaN or inf "
                                  "dynamics, or a singularity)")
             t_new = t + h_abs * direction
             if direction * (t_new - t_end) > 0:
                 t_new = t_end
             h = t_new - t
             h_abs = abs(h)
-            x_new, f_new, err = step(rhs, state, t, x, f, uu, h, rtol, atol)
+            x_new, f_new, err = step(rhs, state, t0 + t, x, f, uu, h, rtol, atol)
             if err < 1:
                 factor = (_DOP_MAX_FACTOR if err == 0 else
                           min(_DOP_MAX_FACTOR, _DOP_SAFETY * err ** _DOP_EXPONENT))

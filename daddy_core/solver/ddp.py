@@ -578,6 +578,14 @@ def ddp(st: Stages, method: Method, opts: SolverOptions, stats: DDPStats,
         step = ctl.step(st, gains, J)
         stats.forward_s += time.perf_counter() - t0
         if step is None:
+            # the whole line search found no step that its model predicts, for a step worth
+            # less than DDP's own stopping test: the mismatch is the forward pass's noise
+            # (round-off, the Dyn rollout's truncation error), which raising rho to rho_max
+            # would spend the budget on (e.g. 20 futile iterations of 21 forward passes each,
+            # half of a many-revolution LEO solve) -- converged as it stands
+            if (not ctl.trust_region and it > opts.ddp_min_iter
+                    and 0.0 <= full_step_gain < opts.tol_ddp and not gains.clipped):
+                return result(True, it - 1, Status.DDP_NOTHING_TO_GAIN)
             if (stop := ctl.rejected(st, gains)) is not None:
                 return result(False, it, stop)
             continue

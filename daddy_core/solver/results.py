@@ -17,6 +17,8 @@ class Status(Enum):
     DDP_MAX_ITER = "ddp_max_iter reached"
     QUU_INDEFINITE = "Q_uu not positive definite up to rho_max"
     LINE_SEARCH_FAILED = "line search failed up to rho_max"
+    DDP_NOTHING_TO_GAIN = ("no step accepted where the full step's predicted decrease is below "
+                           "tol_ddp")
     TRUST_REGION_COLLAPSED = "trust region shrank to round-off"
     # augmented Lagrangian
     AUL_CONVERGED = "max violation below tol_aul"
