@@ -70,6 +70,12 @@ class GuidancePlanner:
         if self.case.spacecraft is None:
             raise DaddyError(f"scenario {cfg.scenario!r} has no spacecraft (mass) model for "
                              "guidance")
+        if self.case.staged_in_angle:
+            # its states are orbital elements staged in true longitude; the node's estimates,
+            # plans and re-gridding are Cartesian and staged in time
+            raise DaddyError(f"scenario {cfg.scenario!r} is Earth-centred (modified equinoctial "
+                             "elements staged in true longitude), which the guidance node does "
+                             "not fly yet: solve it offline with `daddy solve`")
         self.units = self.case.units
         self.rated_problems = [
             problem_from_case(self.case, stages=cfg.stages or None, max_thrust_n=rating)

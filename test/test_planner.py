@@ -435,3 +435,11 @@ def test_warm_replans_optimise_the_cost_their_loaded_plan_was_solved_for():
     pl.load_plan(plan_file, T0_S)
     assert pl.policy.warm.homotopy == pl.policy.arrival.homotopy == ((last["h"], last["delta"]),)
     assert pl.policy.cold.homotopy[-1] == case_last
+
+
+def test_an_earth_centred_scenario_is_refused_by_name():
+    """The node's estimates and plans are Cartesian and staged in time: an Earth-centred
+    scenario (elements staged in true longitude) is refused before anything is built, saying
+    where it can be solved."""
+    with pytest.raises(DaddyError, match="'leo_leo' is Earth-centred .*daddy solve"):
+        GuidancePlanner("leo_leo")
