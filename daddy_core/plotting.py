@@ -36,6 +36,8 @@ def plot_solution(sol, path: str, flown=None, u_max_n: float | None = None) -> N
         ax_o = ax_i.twinx()
         ax_o.plot(days, np.unwrap(np.radians(el[:, 3])) * 180 / np.pi, "C1")
         ax_o.set_ylabel("RAAN [deg]", color="C1")
+        for ax in (ax_a, ax_e, ax_i, ax_o):
+            ax.ticklabel_format(axis="y", useOffset=False)
     else:
         fig, (ax1, ax2) = plt.subplots(1, 2, figsize=(11, 4.5))
         X = sol.X
@@ -52,6 +54,7 @@ def plot_solution(sol, path: str, flown=None, u_max_n: float | None = None) -> N
     ax2.step(days[:-1], thrust, where="post", label="|u|")
     if u_max_n is not None:
         ax2.axhline(u_max_n, color="k", ls="--", lw=0.8, label="u_max")
+    ax2.set_ylim(0.0, 1.1 * max(u_max_n or 0.0, float(np.max(thrust, initial=0.0))) or 1.0)
     ax2.set_xlabel("time [day]")
     ax2.set_ylabel("thrust [N]")
     ax2.set_title(f"{sol.case} ({sol.method})")

@@ -84,7 +84,8 @@ class Case:
         return np.full(N, span / N)
 
     def rhs(self) -> models.Dynamics | None:
-        """Continuous right-hand side rhs(t, x, u), or None for a discrete system."""
+        """Continuous right-hand side rhs(t, x, u) (Earth-centred cases: rhs(L, x, u), the true
+        longitude L the independent variable), or None for a discrete system."""
         if self.system == "double_integrator":
             return None
         c = self.spacecraft.exhaust_speed(self.units)
