@@ -177,7 +177,7 @@ def equinoctial_sundman(gm: float, exhaust_speed: float):
         return dm.vector([
             p * at_w * 2.0 * sqt,
             (ar * sL + ((w + 1.0) * cL + f) * at_w - g * hk * an_w) * sqt,
-            ((w + 1.0) * sL + g) * at_w * sqt - ar * cL * sqt + f * hk * an_w * sqt,
+            (((w + 1.0) * sL + g) * at_w - ar * cL + f * hk * an_w) * sqt,
             an_half * cL,
             an_half * sL,
             tau,
