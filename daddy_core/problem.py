@@ -127,6 +127,8 @@ class Problem:
             ``stage_t0[k]`` = t_start + the lengths of the stages before it.
         time_index: index of the physical time in the state when the independent variable is
             not time (Sundman-transformed stages), else None.
+        labels: optional names of the constraints' components for reports, by function:
+            {"g_ineq": ("thrust bound", ...), "g_teq": ("x", ...), ...}.
     """
 
     name: str
@@ -148,6 +150,7 @@ class Problem:
     rhs: Optional[Dynamics] = None  # continuous dynamics, for re-propagation checks
     t_start: float = 0.0
     time_index: Optional[int] = None
+    labels: dict = field(default_factory=dict)
 
     def __post_init__(self):
         x0 = np.asarray(self.x0, dtype=float)
@@ -336,19 +339,25 @@ class Problem:
 
     def violation_report(self, X: np.ndarray, U: np.ndarray) -> list[dict]:
         """Every constraint's largest violation on (X, U), largest first: {"name" (e.g.
-        "g_ineq[0]", "g_teq[2]"), "violation", "stage" (of the largest, path constraints; None
-        for terminal ones)}. Says which constraints a failed solve could not meet."""
+        "g_ineq[0]", "g_teq[2]"), "label" (``labels``' name for it, or None), "violation",
+        "stage" (of the largest, path constraints; None for terminal ones)}. Says which
+        constraints a failed solve could not meet."""
         g, ni, gt, nti = self.constraint_values(X, U)
         out = []
+
+        def entry(fn, i, violation, stage):
+            names = self.labels.get(fn, ())
+            return {"name": f"{fn}[{i}]", "label": names[i] if i < len(names) else None,
+                    "violation": violation, "stage": stage}
         if g is not None:
             for i, row in enumerate(violations(g, ni)):
                 k = int(np.argmax(row))
-                name = f"g_ineq[{i}]" if i < ni else f"g_eq[{i - ni}]"
-                out.append({"name": name, "violation": float(row[k]), "stage": k})
+                out.append(entry("g_ineq", i, float(row[k]), k) if i < ni
+                           else entry("g_eq", i - ni, float(row[k]), k))
         if gt is not None:
             for i, val in enumerate(violations(gt, nti)):
-                name = f"g_tineq[{i}]" if i < nti else f"g_teq[{i - nti}]"
-                out.append({"name": name, "violation": float(val), "stage": None})
+                out.append(entry("g_tineq", i, float(val), None) if i < nti
+                           else entry("g_teq", i - nti, float(val), None))
         return sorted(out, key=lambda r: -r["violation"])
 
     def terminal_violation(self, x: np.ndarray) -> float:

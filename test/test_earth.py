@@ -126,3 +126,16 @@ def test_catalogue_earth_transfer_energy_optimal(name, mass_kg):
     assert sol.X[-1, 5] == pytest.approx(case.tof, rel=1e-10)
     if mass_kg is not None:
         assert sol.final_mass_kg == pytest.approx(mass_kg, abs=0.05)
+
+
+def test_violations_of_an_earth_case_are_named_by_element():
+    """A failed solve names what it could not meet: the catalogue problems label their
+    constraints' components (the Earth arrival by element and arrival time)."""
+    prob = problem_from_case(load_case("leo_leo"), stages=40)
+    X = prob.rollout(np.zeros((prob.N, 3)))
+    report = prob.violation_report(X, np.zeros((prob.N, 3)))
+    labels = {r["name"]: r["label"] for r in report}
+    assert labels["g_teq[0]"] == "p" and labels["g_teq[3]"] == "h"
+    assert labels["g_teq[5]"] == "arrival time" and labels["g_ineq[1]"] == "dry mass"
+    from daddy_core.solver.solve import _describe
+    assert _describe(report[0]).startswith(f"{report[0]['name']} ({report[0]['label']}) ")

@@ -30,6 +30,10 @@ def low_thrust_costs(residual, u_max: float, dt_avg: float, stage_gain: float,
     return stage_cost, terminal_cost
 
 
+CARTESIAN_LABELS = ("x", "y", "z", "vx", "vy", "vz")
+ORBIT_LABELS = ("p", "f", "g", "h", "k", "arrival time")
+
+
 def _cartesian_miss(x, xt):
     """Position and velocity miss (6,) of a Cartesian state."""
     return x[:6] - xt[:6]
@@ -105,4 +109,6 @@ def problem_from_case(case: Case, integrator: str = "rk78", integrator_tol: floa
                    step=flow_step(rhs, integrator, tol), stage_cost=stage_cost,
                    terminal_cost=terminal_cost, g_ineq=g_ineq,
                    g_teq=miss, units=units, spacecraft=sc, u_max=u_bound, mass_index=6, rhs=rhs,
-                   t_start=case.t_start, time_index=5 if case.staged_in_angle else None)
+                   t_start=case.t_start, time_index=5 if case.staged_in_angle else None,
+                   labels={"g_ineq": ("thrust bound", "dry mass"),
+                           "g_teq": (ORBIT_LABELS if case.staged_in_angle else CARTESIAN_LABELS)})

@@ -25,6 +25,13 @@ from .solution import Solution, WarmStart
 from .stage_maps import StageMaps
 
 
+def _describe(r: dict) -> str:
+    """One entry of ``Problem.violation_report`` as the reason of a failed solve names it."""
+    label = "" if r.get("label") is None else f" ({r['label']})"
+    stage = "" if r["stage"] is None else f" (stage {r['stage']})"
+    return f"{r['name']}{label} {r['violation']:.2e}{stage}"
+
+
 def repropagation_miss(problem: Problem, U: np.ndarray) -> float | None:
     """Terminal miss (max terminal-constraint violation) after re-propagating U from x0 with
     DOP853 at rtol = atol = 1e-12, stage by stage (``integrators.dop853``: solve_ivp's scheme and
@@ -253,9 +260,7 @@ def _assemble(problem: Problem, end: _End, hres: HomotopyResult, steps: tuple, m
     if not converged:   # say which constraints the returned iterate does not meet
         worst = [r for r in violations[:3] if r["violation"] > opts.tol_newton]
         if worst:
-            reason += "; largest violations: " + ", ".join(
-                f"{r['name']} {r['violation']:.2e}"
-                + ("" if r["stage"] is None else f" (stage {r['stage']})") for r in worst)
+            reason += "; largest violations: " + ", ".join(_describe(r) for r in worst)
     opt = end.optimality
     if polish and converged and math.isfinite(opts.tol_optimality) and (
             opt is None or opt.kkt_residual > opts.tol_optimality):
