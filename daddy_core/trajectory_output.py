@@ -56,7 +56,8 @@ def earth_cartesian_si(sol) -> np.ndarray:
 def earth_elements(sol) -> np.ndarray:
     """(N+1, 6) Keplerian elements of an Earth-centred solution's nodes: a [km], e, i [deg],
     RAAN [deg], argument of perigee [deg], true longitude [deg] (RAAN + argp + true anomaly;
-    the angles in [0, 360))."""
+    the angles in [0, 360); RAAN is undefined at i = 0 and argp at e = 0, where these
+    values are arbitrary and the true longitude is what locates the spacecraft)."""
     units = Units.from_dict(sol.units)
     p, f, g, h, k = sol.X[:, :5].T
     e = np.hypot(f, g)
@@ -125,6 +126,6 @@ def write_oem(sol, path: str | Path, epoch: datetime = J2000, object_name: str |
              "TIME_SYSTEM = UTC", f"START_TIME = {stamp(t[0])}", f"STOP_TIME = {stamp(t[-1])}",
              "META_STOP", "",
              f"COMMENT {sol.method} {'fuel' if sol.fuel_optimal else 'energy'}-optimal, "
-             f"converged {sol.converged}, final mass {sol.final_mass_kg} kg"]
+             f"converged {sol.converged}, final mass {sol.final_mass_kg:.3f} kg"]
     lines += [stamp(s) + " " + " ".join(f"{v: .12e}" for v in row) for s, row in zip(t, rv)]
     Path(path).write_text("\n".join(lines) + "\n")
