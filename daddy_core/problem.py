@@ -113,8 +113,9 @@ class Problem:
         x0: (nx,) initial state; x_target: (nx,) target state.
         stage_dt: (N,) stage lengths in the independent variable: durations (normalised time),
             or angles for Sundman-transformed stages.
-        step: f(x, u, dt) -> next state, the flow over one stage (float or DA, batched): a
-            ``StageStep`` (``flow_step`` builds one from a right-hand side) or a plain function.
+        step: f(x, u, dt, t0) -> next state, the flow over one stage (float or DA, batched):
+            a ``StageStep`` (``flow_step`` builds one from a right-hand side) or a plain
+            function f(x, u, dt) of an autonomous system.
         stage_cost: l(x, u, dt, hom) -> (B,).
         terminal_cost: phi(x, x_target) -> scalar.
         g_ineq, g_eq: path constraints (x, u, dt) -> (n, B), or None.

@@ -48,7 +48,7 @@ def earth_cartesian_si(sol) -> np.ndarray:
     ascension of the ascending node)."""
     units = Units.from_dict(sol.units)
     L = node_longitudes(sol)
-    rv = np.array([models.mee_to_cartesian(x[:5], l, units.gm) for x, l in zip(sol.X, L)])
+    rv = models.mee_to_cartesian(sol.X[:, :5].T, L, units.gm).T   # every node at once
     return np.column_stack([units.length_m(rv[:, :3]), units.speed_m_s(rv[:, 3:]),
                             units.mass_kg(sol.X[:, 6])])
 

@@ -186,11 +186,10 @@ def equinoctial_sundman(gm: float, exhaust_speed: float):
 
 
 def keplerian_to_equinoctial(a, e, i_rad, raan_rad, argp_rad, nu_rad):
-    """Keplerian elements -> [a, p, q, r, s, L] (paper eq. 21), true longitude L."""
-    lp = raan_rad + argp_rad
-    t = np.tan(i_rad / 2.0)
-    return np.array([a, e * np.sin(lp), e * np.cos(lp), t * np.sin(raan_rad),
-                     t * np.cos(raan_rad), lp + nu_rad])
+    """Keplerian elements -> [a, p, q, r, s, L] (paper eq. 21), true longitude L: the modified
+    elements' f, g, h, k in the paper's order and names (p = g, q = f, r = k, s = h)."""
+    (_, f, g, h, k), L = keplerian_to_mee(a, e, i_rad, raan_rad, argp_rad, nu_rad)
+    return np.array([a, g, f, k, h, L])
 
 
 def keplerian_to_mee(a, e, i_rad, raan_rad, argp_rad, nu_rad):
@@ -203,7 +202,8 @@ def keplerian_to_mee(a, e, i_rad, raan_rad, argp_rad, nu_rad):
 
 def mee_to_cartesian(mee, L, gm: float) -> np.ndarray:
     """Modified equinoctial [p, f, g, h, k] at true longitude L -> position and velocity (6,)
-    (Walker et al. 1985; Betts), in the units of p with gravitational parameter gm."""
+    (Walker et al. 1985; Betts), in the units of p with gravitational parameter gm; element-wise
+    on arrays: mee (5, K) and L (K,) give (6, K)."""
     p, f, g, h, k = mee[:5]
     alpha2 = h * h - k * k
     s2 = 1.0 + h * h + k * k

@@ -118,8 +118,9 @@ class Solution:
             d["U_N"] = self.thrust_n.tolist()
             d["X_SI"] = self.X_si.tolist()
             d["times_s"] = self.times_s.tolist()
-            if self.elements is not None:
-                d["elements_km_deg"] = self.elements.tolist()
+            elements = self.elements
+            if elements is not None:
+                d["elements_km_deg"] = elements.tolist()
         return d
 
     def to_json(self, path: str | Path | None = None) -> str:
