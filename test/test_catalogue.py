@@ -11,8 +11,8 @@ from daddy_core.catalogue import case_from_dict, list_cases, load_case
 EXPECTED = {  # name: (tof days, N); Earth-centred cases: N from their revolutions (below)
     "earth_mars": (348.79, 40), "halo_l2_l1": (20, 110), "nrho_dro": (21.2, 150),
     "lyapunov_l1_l2": (12, 300), "dro_dro": (17.5, 100), "dro_dro_2rev": (33, 300),
-    "dro_dro_3rev": (52.75, 200), "leo_leo": (35, 5221), "meo_meo": (55, 1199),
-    "gto_geo": (95, 4969),
+    "dro_dro_3rev": (52.75, 200), "leo_leo": (35, 5221), "leo_leo_j2": (35, 5221),
+    "meo_meo": (55, 1199), "gto_geo": (95, 4969),
 }
 
 
@@ -69,6 +69,27 @@ def test_earth_cases_are_staged_in_true_longitude():
             case_from_dict({**d, field: value})
     with pytest.raises(DaddyError, match="'stages': Earth-centred cases are staged in true"):
         case_from_dict({**d, "stages": 5000})
+
+
+def test_perturbations_and_reach_of_earth_cases_are_checked():
+    """``perturbations`` lists known forces and only on Earth-centred cases; a target out of
+    reach in the time of flight is refused with Edelbaum's estimate before anything is built:
+    the LEO transfer (1.058 km/s; 0.5 N at 2000 s make 0.884 km/s in 20 days) -- and one whose
+    time of flight allows it (25 days) loads."""
+    from daddy_core.catalogue.cases import Perturbation
+    cases_dir = load_case.__globals__["CASES_DIR"]
+    assert load_case("leo_leo_j2").perturbations == {Perturbation.J2}
+    assert load_case("leo_leo").perturbations == frozenset()
+    d = json.loads((cases_dir / "leo_leo.json").read_text())
+    with pytest.raises(DaddyError, match="'perturbations' must be a list of"):
+        case_from_dict({**d, "perturbations": ["j3"]})
+    with pytest.raises(DaddyError, match="'perturbations' is for Earth-centred cases"):
+        case_from_dict({**json.loads((cases_dir / "earth_mars.json").read_text()),
+                        "perturbations": ["j2"]})
+    with pytest.raises(DaddyError, match=r"cannot be reached in 20 days: Edelbaum's estimate of "
+                                         r"the transfer is 1.058 km/s.* make 0.884 km/s"):
+        case_from_dict({**d, "tof_days": 20})
+    assert case_from_dict({**d, "tof_days": 25}).tof == pytest.approx(25.0)
 
 
 def test_user_case_file(tmp_path):

@@ -13,20 +13,25 @@ Sundman transformation, ``models.equinoctial_sundman``): their state is [p, f, g
 the stages are ``stages_per_revolution`` equal arcs of L over ``revolutions`` revolutions
 (optional: by default the revolutions a spacecraft makes in the time of flight at the mean of
 the initial and target mean motions), and the arrival is the target orbit (p, f, g, h, k) at
-t = ToF anywhere along it: the target's true anomaly is not used.
+t = ToF anywhere along it: the target's true anomaly is not used. ``perturbations`` (optional)
+lists the forces beyond point-mass gravity and thrust: ``["j2"]``, the Earth's oblateness.
+Before any iteration the transfer is checked against what the thruster can do (``edelbaum``).
 """
 from __future__ import annotations
 
 import json
 import math
 from dataclasses import dataclass, field
+from enum import Enum
 from pathlib import Path
 
 import numpy as np
 
 from ..dynamics import models
-from ..dynamics.units import DAY_S, EARTH_RADIUS_KM, SYSTEM_UNITS, Spacecraft, Units
+from ..dynamics.units import (DAY_S, EARTH_J2, EARTH_J2_RADIUS_KM, EARTH_RADIUS_KM, SYSTEM_UNITS,
+                              Spacecraft, Units)
 from ..errors import DaddyError
+from .edelbaum import check_reachable
 
 CASES_DIR = Path(__file__).with_name("cases")
 SYSTEMS = tuple(SYSTEM_UNITS)
@@ -34,6 +39,12 @@ STATE_UNITS = ("normalized", "km_km_s", "keplerian_km_deg")
 PROBLEM_KEYS = ("stage_cost_gain", "terminal_cost_gain", "integrator_tol")
 # a case's solver section: the paper's per-case settings (``solver.case_options``), no others
 SOLVER_KEYS = ("tol_ddp", "tol_aul", "tol_newton", "rho_max", "homotopy", "u_guess_n")
+
+
+class Perturbation(str, Enum):
+    """A force an Earth-centred case may add to point-mass gravity and thrust."""
+
+    J2 = "j2"   # the Earth's oblateness (``units.EARTH_J2``)
 
 
 @dataclass(frozen=True)
@@ -53,6 +64,7 @@ class Case:
         revolutions: Earth-centred cases: the revolutions of the transfer (the stages span
             2 pi revolutions of true longitude); None for cases staged in time.
         t_start: the true longitude of x0 for Earth-centred cases [rad], else 0.
+        perturbations: the forces beyond point-mass gravity and thrust (Earth-centred cases).
     """
 
     name: str
@@ -68,6 +80,7 @@ class Case:
     solver: dict = field(default_factory=dict)
     revolutions: float | None = None
     t_start: float = 0.0
+    perturbations: frozenset = frozenset()
 
     @property
     def staged_in_angle(self) -> bool:
@@ -93,6 +106,9 @@ class Case:
             return models.two_body(self.units.gm, c)
         if self.system == "earth_moon_cr3bp":
             return models.cr3bp(self.units.gm, c)
+        if Perturbation.J2 in self.perturbations:
+            return models.equinoctial_sundman(self.units.gm, c, EARTH_J2,
+                                              EARTH_J2_RADIUS_KM / self.units.lu_km)
         return models.equinoctial_sundman(self.units.gm, c)
 
 
@@ -145,6 +161,9 @@ def case_from_dict(d: dict) -> Case:
         raise DaddyError(f"case field 'solver.{unknown[0]}' is not a case setting (solver settings: "
                          f"{', '.join(SOLVER_KEYS)}; other solver options are SolverOptions "
                          "fields, the same for every case)")
+    if "perturbations" in d and system != "earth_equinoctial":
+        raise DaddyError("case field 'perturbations' is for Earth-centred cases (system "
+                         f"'earth_equinoctial'); this case's system is {system!r}")
     x0 = _vector(need("x0"), "x0", 6)
     xt = _vector(need("x_target"), "x_target", 6)
 
@@ -192,11 +211,21 @@ def _earth_case(d: dict, name: str, units: Units, spacecraft: Spacecraft, x0: np
     elif not (isinstance(revs, (int, float)) and revs > 0 and math.isfinite(revs)):
         raise DaddyError(f"case field 'revolutions' must be a positive number, got {revs!r}")
     stages = max(1, round(revs * spr))
+    perturbations = _perturbations(d.get("perturbations", []))
+    check_reachable(mee0, mee_t, units, spacecraft, tof, Perturbation.J2 in perturbations)
     return Case(name=name, description=str(d.get("description", "")), system="earth_equinoctial",
                 units=units, spacecraft=spacecraft, x0=np.concatenate([mee0, [0.0, m0]]),
                 x_target=np.concatenate([mee_t, [tof, m0]]), tof=tof, stages=stages,
                 problem=dict(d.get("problem", {})), solver=dict(d.get("solver", {})),
-                revolutions=float(revs), t_start=L0)
+                revolutions=float(revs), t_start=L0, perturbations=perturbations)
+
+
+def _perturbations(names) -> frozenset:
+    """A case file's ``perturbations`` list -> the set of ``Perturbation``s."""
+    known = [p.value for p in Perturbation]
+    if not isinstance(names, list) or any(n not in known for n in names):
+        raise DaddyError(f"case field 'perturbations' must be a list of {known}, got {names!r}")
+    return frozenset(Perturbation(n) for n in names)
 
 
 def _mean_motion(mee: np.ndarray, gm: float) -> float:

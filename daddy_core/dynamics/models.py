@@ -139,7 +139,7 @@ def equinoctial(gm: float, exhaust_speed: float):
     return _indexed(rhs)
 
 
-def equinoctial_sundman(gm: float, exhaust_speed: float):
+def equinoctial_sundman(gm: float, exhaust_speed: float, j2: float = 0.0, j2_radius: float = 0.0):
     """Earth-centred Gauss equations in modified equinoctial elements with the true longitude L
     as the independent variable (a Sundman transformation, dt = dL / Ldot): rhs(L, x, u) = dx/dL.
 
@@ -155,9 +155,17 @@ def equinoctial_sundman(gm: float, exhaust_speed: float):
     stages in L are equal arcs of the orbit: for a near-circular orbit near-equal durations
     that one RK78 step integrates, for an eccentric one short near perigee where the dynamics
     are fast, which equal stages in time are not.
+
+    ``j2`` > 0 adds the Earth's oblateness (zonal harmonic J2 with its reference radius
+    ``j2_radius``, in the units of p) to the thrust acceleration, in RTN (Betts, Practical
+    Methods for Optimal Control, 2nd ed., sec. 6.3): with r = p / w, hk as below, s2 = 1 + h^2 +
+    k^2 and C = -3/2 gm J2 R^2 / r^4, a_r = C (1 - 12 hk^2 / s2^2), a_t = 8 C hk (h cos L + k sin
+    L) / s2^2, a_n = 4 C (1 - h^2 - k^2) hk / s2^2 -- the gradient of the J2 potential in the
+    orbit's frame, the Earth's axis along z of the elements' inertial frame.
     """
     inv_sqrt_gm = gm ** -0.5
     inv_c = -1.0 / exhaust_speed
+    j2c = -1.5 * gm * j2 * j2_radius ** 2
 
     def rhs(L, x, u):
         p, f, g, h, k, m = x[0], x[1], x[2], x[3], x[4], x[6]
@@ -169,6 +177,14 @@ def equinoctial_sundman(gm: float, exhaust_speed: float):
         sq = dm.sqrt(p) * inv_sqrt_gm     # sqrt(p / gm)
         hk = h * sL - k * cL
         s2 = 1.0 + h * h + k * k
+        if j2c:
+            wp = w * (1.0 / p)                     # 1 / r
+            c = wp * wp * (wp * wp) * j2c          # -3/2 gm J2 R^2 / r^4
+            inv_s2 = 1.0 / s2
+            c_hk = c * hk * (inv_s2 * inv_s2)      # C hk / s2^2
+            ar = ar + c - c_hk * hk * 12.0
+            at = at + c_hk * (h * cL + k * sL) * 8.0
+            an = an + c_hk * (1.0 - h * h - k * k) * 4.0
         at_w, an_w = at * inv_w, an * inv_w
         # dt/dL = 1 / Ldot; Ldot = sqrt(gm / p^3) w^2 + sqrt(p / gm) hk a_n / w
         tau = 1.0 / (w * w * (1.0 / (sq * p)) + sq * hk * an_w)
