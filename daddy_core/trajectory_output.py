@@ -42,15 +42,17 @@ def node_longitudes(sol) -> np.ndarray:
     return sol.t_start + np.concatenate([[0.0], np.cumsum(sol.stage_dt)])
 
 
-def earth_cartesian_si(sol) -> np.ndarray:
+def earth_cartesian_si(sol, X: np.ndarray | None = None) -> np.ndarray:
     """(N+1, 7) Earth-centred inertial states [position m (3), velocity m/s (3), mass kg] of an
     Earth-centred solution (the frame of its elements: x towards the line of zero right
-    ascension of the ascending node)."""
+    ascension of the ascending node); ``X``: other states on the solution's nodes (default
+    its own)."""
     units = Units.from_dict(sol.units)
+    X = sol.X if X is None else X
     L = node_longitudes(sol)
-    rv = models.mee_to_cartesian(sol.X[:, :5].T, L, units.gm).T   # every node at once
+    rv = models.mee_to_cartesian(X[:, :5].T, L, units.gm).T   # every node at once
     return np.column_stack([units.length_m(rv[:, :3]), units.speed_m_s(rv[:, 3:]),
-                            units.mass_kg(sol.X[:, 6])])
+                            units.mass_kg(X[:, 6])])
 
 
 def earth_elements(sol) -> np.ndarray:

@@ -44,8 +44,7 @@ class EstimateChecks:
         if vel.shape != (3,) or not np.all(np.isfinite(vel)):
             raise InputRejected("state_estimate.twist.twist.linear is not 3 finite numbers")
         check_stamp(stamp_s, "state_estimate")
-        u = self.units
-        self._check_domain(np.concatenate([u.length(pos), u.speed(vel)]))
+        self._check_domain(self.units.cartesian_normalised(np.concatenate([pos, vel])))
 
     def check_mass(self, mass_kg, stamp_s: float | None = None) -> None:
         """Raise InputRejected unless dry mass < mass_kg <= wet mass (+ tolerance)."""
@@ -63,8 +62,8 @@ class EstimateChecks:
 
     def check_state(self, pos_m, vel_m_s, mass_kg, stamp_s: float,
                     now_s: float | None = None) -> np.ndarray:
-        """All checks of one estimate used at time now_s; returns the normalised state (7,).
-        Raises InputRejected (naming the field) for an estimate the planner must not use."""
+        """All checks of one estimate used at time now_s; returns the normalised Cartesian
+        state [r, v, m] (7,) (``frames`` maps it onto the scenario's own state). Raises InputRejected (naming the field) for an estimate the planner must not use."""
         self.check_estimate(pos_m, vel_m_s, stamp_s)
         self.check_mass(mass_kg)
         if now_s is not None:
@@ -74,9 +73,9 @@ class EstimateChecks:
             if now_s - stamp_s > self.staleness_s:
                 raise InputRejected(f"state_estimate.header.stamp is stale ({now_s - stamp_s:.3g}"
                                     f" s old, bound staleness_s = {self.staleness_s:.3g} s)", Code.STALE)
-        return self.units.states_normalised(np.concatenate([np.asarray(pos_m, float),
-                                                            np.asarray(vel_m_s, float),
-                                                            [mass_kg]]))
+        return self.units.cartesian_normalised(np.concatenate([np.asarray(pos_m, float),
+                                                               np.asarray(vel_m_s, float),
+                                                               [mass_kg]]))
 
     def _check_domain(self, x: np.ndarray) -> None:
         sys = self.case.system
@@ -90,6 +89,14 @@ class EstimateChecks:
             if np.linalg.norm(r) > 5.0 or np.linalg.norm(x[3:6]) > 10.0:
                 raise InputRejected("state_estimate (position or velocity) is far outside the "
                                     "Earth-Moon domain")
+        elif sys == "earth_equinoctial":
+            # the elements of an open orbit do not exist
+            if np.linalg.norm(r) < EARTH_RADIUS_KM / self.units.lu_km:
+                raise InputRejected("state_estimate.pose.pose.position is inside the Earth")
+            if not x[3:6] @ x[3:6] / 2 - self.units.gm / np.linalg.norm(r) < 0:
+                raise InputRejected("state_estimate.twist.twist.linear: not a closed orbit "
+                                    "(escape speed or above), which the Earth-centred "
+                                    "scenario's orbital elements need")
         elif sys == "sun_two_body":
             if not 0.05 < np.linalg.norm(r) < 50.0 or np.linalg.norm(x[3:6]) > 10.0:
                 raise InputRejected("state_estimate (position or velocity) is outside the "

@@ -286,7 +286,8 @@ class GuidanceNode(LifecycleNode):
         plan = self.planner.plan or self._adopt_nominal()
         # an estimate that triggers a re-plan gets its thrust command after it (_finish)
         if plan is not None and not self._self_triggered(est, stamp, plan):
-            self.pub_thrust.publish(cv.thrust_command(plan.thrust_at(stamp), stamp, self.frame_id))
+            self.pub_thrust.publish(cv.thrust_command(
+                plan.command_at(stamp, est.pos_m, est.vel_m_s), stamp, self.frame_id))
         self._maybe_replan_after_restart()
 
     def _self_triggered(self, est, stamp: float, plan) -> bool:
@@ -506,7 +507,12 @@ class GuidanceNode(LifecycleNode):
         if plan is None or not self._active:
             return
         for s in stamps:
-            self.pub_thrust.publish(cv.thrust_command(plan.thrust_at(s), s, self.frame_id))
+            try:
+                est = self.queue.state_for(s)   # the estimate of that stamp (RTN plans turn)
+            except InputRejected:
+                continue
+            self.pub_thrust.publish(cv.thrust_command(plan.command_at(s, est.pos_m, est.vel_m_s),
+                                                      s, self.frame_id))
 
     def adopt_plan(self, plan) -> None:
         """Make ``plan`` the current plan and publish it (e.g. a nominal computed elsewhere)."""
@@ -518,7 +524,8 @@ class GuidanceNode(LifecycleNode):
 
     # ------------------------------------------------------------------ outputs
     def _publish_plan(self, plan, stamp):
-        self.pub_schedule.publish(cv.plan_to_joint_trajectory(plan, self.frame_id, stamp))
+        self.pub_schedule.publish(cv.plan_to_joint_trajectory(
+            plan, f"{self.frame_id}_rtn" if plan.thrust_rtn else self.frame_id, stamp))
         self.pub_path.publish(cv.plan_to_path(plan, self.frame_id))
 
     def _diag(self, level: Level, code: Code, message: str, values: dict, stamp,

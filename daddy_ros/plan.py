@@ -12,6 +12,8 @@ from pathlib import Path
 
 import numpy as np
 
+from daddy_core import trajectory_output
+from daddy_core.dynamics import models
 from daddy_core.dynamics.units import Units
 from daddy_core.errors import DaddyError
 from daddy_core.solver import Solution
@@ -75,6 +77,8 @@ class Plan:
         request_id, solve_time_s, warm_start, max_violation: provenance for diagnostics.
         thrust_bound_n: the thrust bound the plan was optimised under [N] (a rung of the
             margin ladder, see ``replan_policy``).
+        thrust_rtn: the thrust is in the radial / transverse / normal axes of the osculating
+            orbit (Earth-centred scenarios), not in the scenario's frame.
     """
 
     epoch_s: float
@@ -87,15 +91,23 @@ class Plan:
     warm_start: bool = False
     max_violation: float = 0.0
     thrust_bound_n: float = 0.0
+    thrust_rtn: bool = False
 
     @classmethod
     def of(cls, sol: Solution, X: np.ndarray, epoch_s: float, units: Units, thrust_bound: float,
            request_id: str = "", solve_time_s: float = 0.0, warm_start: bool = False) -> "Plan":
         """The plan flying ``sol``'s controls from ``epoch_s``, predicted states X (normalised)
-        and thrust bound (normalised)."""
-        return cls(epoch_s, sol.stage_dt * units.tu_s, sol.thrust_n.copy(), units.states_si(X),
-                   sol, request_id, solve_time_s, warm_start, sol.max_violation,
-                   float(units.thrust_n(thrust_bound)))
+        and thrust bound (normalised). A solution staged in true longitude (Earth-centred)
+        gives its stage durations from its time states and its states in Cartesian
+        coordinates, as every plan holds them."""
+        if trajectory_output.is_earth_centred(sol):
+            dt_s = np.diff(X[:, sol.time_index]) * units.tu_s
+            states = trajectory_output.earth_cartesian_si(sol, X)
+        else:
+            dt_s, states = sol.stage_dt * units.tu_s, units.states_si(X)
+        return cls(epoch_s, dt_s, sol.thrust_n.copy(), states, sol, request_id, solve_time_s,
+                   warm_start, sol.max_violation, float(units.thrust_n(thrust_bound)),
+                   trajectory_output.is_earth_centred(sol))
 
     @property
     def stage_start_s(self) -> np.ndarray:
@@ -123,6 +135,14 @@ class Plan:
             return np.zeros(3)
         k = int(np.searchsorted(np.cumsum(self.stage_dt_s), rel, side="right"))
         return self.thrust_n[min(k, len(self.thrust_n) - 1)].copy()
+
+
+    def command_at(self, t_s: float, pos_m, vel_m_s) -> np.ndarray:
+        """The thrust command [N] at time t in the scenario's frame, for a spacecraft at
+        position pos_m and velocity vel_m_s (an RTN plan's thrust turns with the orbit: its
+        axes are those of the osculating orbit of that state)."""
+        u = self.thrust_at(t_s)
+        return models.rtn_basis(pos_m, vel_m_s) @ u if self.thrust_rtn else u
 
 
 @dataclass

@@ -27,6 +27,7 @@ from daddy_core.solver.stage_maps import StageMaps, expand_dynamics
 from .assessment import Assessment, assess
 from .checks import EstimateChecks
 from .config import PlannerConfig
+from .frames import grid_of
 from .plan import (SATURATION_SLACK, Code, Level, Plan, ReplanOutcome, read_plan_file,
                    write_plan_file)
 from .replan_policy import LADDER_MIN_GAIN, ReplanPolicy, margin_ratings
@@ -70,13 +71,8 @@ class GuidancePlanner:
         if self.case.spacecraft is None:
             raise DaddyError(f"scenario {cfg.scenario!r} has no spacecraft (mass) model for "
                              "guidance")
-        if self.case.staged_in_angle:
-            # its states are orbital elements staged in true longitude; the node's estimates,
-            # plans and re-gridding are Cartesian and staged in time
-            raise DaddyError(f"scenario {cfg.scenario!r} is Earth-centred (modified equinoctial "
-                             "elements staged in true longitude), which the guidance node does "
-                             "not fly yet: solve it offline with `daddy solve`")
         self.units = self.case.units
+        self.grid = grid_of(self.case)   # where an estimate lies on the stages (time or angle)
         self.rated_problems = [
             problem_from_case(self.case, stages=cfg.stages or None, max_thrust_n=rating)
             for rating in margin_ratings(self.case.spacecraft.max_thrust_n, cfg.thrust_margin)]
@@ -115,9 +111,10 @@ class GuidancePlanner:
         with self._lock:
             self._plan = plan
 
-    def shift(self, plan: Plan | None, t_s: float, x0: np.ndarray) -> Shifted:
-        """The remaining problem of ``plan`` from state x0 (normalised) at time t_s."""
-        return shift_plan(self.base_problem, plan, t_s, x0, self.units,
+    def shift(self, plan: Plan | None, t_s: float, x_cart: np.ndarray) -> Shifted:
+        """The remaining problem of ``plan`` from the Cartesian estimate x_cart = [r, v, m]
+        (normalised) at time t_s."""
+        return shift_plan(self.base_problem, plan, t_s, x_cart, self.grid, self.units,
                           self.config.arrival_tolerance_m)
 
     # ------------------------------------------------------------------ re-optimisation
@@ -284,7 +281,7 @@ class GuidancePlanner:
         fast as the later ones."""
         if sol.stage_maps is None:
             try:
-                problem = self.base_problem.with_x0(sol.X[0], sol.stage_dt)
+                problem = self.base_problem.with_x0(sol.X[0], sol.stage_dt, sol.t_start)
                 sol.stage_maps = StageMaps.of(expand_dynamics(problem, sol.X[:-1], sol.U),
                                               sol.X, sol.U, self.policy.warm.eps_da)
             except (DaddyError, ValueError, ArithmeticError):

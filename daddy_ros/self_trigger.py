@@ -46,9 +46,10 @@ class Reason(str, enum.Enum):
 
 
 def propagate(case: Case, x: np.ndarray, thrust_n, dt_s: float) -> np.ndarray:
-    """The dynamics without errors: the normalised state x after dt_s under thrust_n [N]."""
+    """The dynamics without errors: the normalised Cartesian state x = [r, v, m] after dt_s
+    under thrust_n [N] (in the scenario's frame; Earth-centred scenarios: in RTN)."""
     u = case.units
-    return rk78(case.rhs(), x, u.thrust(np.asarray(thrust_n, float)), 0.0,
+    return rk78(case.cartesian_rhs(), x, u.thrust(np.asarray(thrust_n, float)), 0.0,
                 float(u.time(dt_s)), tol=1e-12)
 
 
@@ -79,7 +80,9 @@ class ReplanTrigger:
         if not settings.self_replan:
             return None
         base = planner.base_problem
-        return cls(planner.case, settings, float(planner.units.time_s(base.stage_dt[0])),
+        # the nominal grid in time: equal stages (of true longitude, for Earth-centred
+        # scenarios: then their mean duration)
+        return cls(planner.case, settings, float(planner.units.time_s(planner.case.tof / base.N)),
                    base.N)
 
     def observe(self, t_s: float, pos_m, vel_m_s, mass_kg: float,
@@ -117,7 +120,8 @@ class ReplanTrigger:
 
     # ------------------------------------------------------------------ internals
     def _reset(self, t_s, pos_m, vel_m_s, mass_kg):
-        self._x = self.case.units.states_normalised(np.concatenate([pos_m, vel_m_s, [mass_kg]]))
+        self._x = self.case.units.cartesian_normalised(np.concatenate([pos_m, vel_m_s,
+                                                                       [mass_kg]]))
         self._t = t_s
 
     def _advance(self, t_s: float, plan: Plan) -> None:
@@ -145,7 +149,7 @@ class ReplanTrigger:
         s = self.settings
         if not (s.trigger_position_m or s.trigger_velocity_m_s):
             return False
-        x = self.case.units.states_si(self._x)
+        x = self.case.units.cartesian_si(self._x)
         dr = float(np.linalg.norm(np.asarray(pos_m) - x[:3]))
         dv = float(np.linalg.norm(np.asarray(vel_m_s) - x[3:6]))
         return bool((s.trigger_position_m and dr > s.trigger_position_m)

@@ -3,7 +3,9 @@ time, and the arrival phase's re-grid and terminal constraints. ROS-free.
 
 Stages already executed are dropped and the time to go is kept: the first remaining stage is
 shortened to end on the plan's stage boundary, or merged into the next when shorter than
-MIN_STAGE_FRACTION of a stage. Fewer than MIN_STAGES_LEFT stages are re-gridded into that many
+MIN_STAGE_FRACTION of a stage (boundaries and lengths on the scenario's grid, ``frames``: time,
+or the true longitude of Earth-centred scenarios, whose time to go is then the arrival-time
+constraint's). Fewer than MIN_STAGES_LEFT stages are re-gridded into that many
 (the arrival phase), so that enough controls remain for the terminal constraints.
 """
 from __future__ import annotations
@@ -18,6 +20,7 @@ from daddy_core.problem import Problem
 from daddy_core.solver import WarmStart
 
 from .checks import InputRejected
+from .frames import CartesianGrid, LongitudeGrid
 from .plan import TIME_TOLERANCE_S, Code, Plan
 
 # a first remaining stage shorter than this fraction of a nominal stage is merged into the next
@@ -42,25 +45,29 @@ class Shifted:
     arrival: bool = False
 
 
-def shift_plan(base: Problem, plan: Plan | None, t_s: float, x0: np.ndarray, units: Units,
+def shift_plan(base: Problem, plan: Plan | None, t_s: float, x_cart: np.ndarray,
+               grid: CartesianGrid | LongitudeGrid, units: Units,
                arrival_tolerance_m: float = 0.0) -> Shifted:
-    """The remaining problem of ``plan`` (stages of ``base``) from state x0 (normalised) at
-    time t_s (see the module docstring); without a plan, the full problem from x0. In the
-    arrival phase the terminal position may keep ``arrival_tolerance_m`` from the target
-    (``arrival_constraints``)."""
+    """The remaining problem of ``plan`` (stages of ``base``) from the estimate x_cart = [r,
+    v, m] (normalised) at time t_s (see the module docstring), cut where ``grid`` places the
+    estimate (time, or true longitude for Earth-centred scenarios); without a plan, the full
+    problem from it. In the arrival phase the terminal position may keep
+    ``arrival_tolerance_m`` from the target (``arrival_constraints``)."""
+    x0, s0 = grid.state(x_cart, t_s, plan)
     if plan is None:
-        return Shifted(base.with_x0(x0))
-    bounds = plan.epoch_s + np.cumsum(plan.stage_dt_s)          # stage end times
-    k0 = int(np.searchsorted(bounds, t_s + TIME_TOLERANCE_S, side="right"))
-    if k0 >= len(plan.stage_dt_s):
+        return Shifted(base.with_x0(x0, t_start=grid.problem_grid(base.stage_dt, s0)[1]))
+    bounds, lengths = grid.ends(plan)                              # stage ends on the grid
+    tolerance = TIME_TOLERANCE_S * float(np.median(lengths / plan.stage_dt_s))
+    k0 = int(np.searchsorted(bounds, s0 + tolerance, side="right"))
+    if k0 >= len(lengths) or t_s + TIME_TOLERANCE_S >= plan.end_s:
         raise InputRejected("the plan has ended: no stage remains after header.stamp",
                             Code.PLAN_ENDED)
-    first = bounds[k0] - t_s
-    dts = plan.stage_dt_s[k0:].astype(float).copy()
+    first = bounds[k0] - s0
+    dts = lengths[k0:].copy()
     U = plan.solution.U[k0:].copy()
     lam = np.asarray(plan.solution.duals.get("lam", []), float)
     lam = lam[:, k0:] if lam.ndim == 2 and lam.shape[1] == len(plan.stage_dt_s) else None
-    nominal = float(np.median(plan.stage_dt_s))
+    nominal = float(np.median(lengths))
     maps = plan.solution.stage_maps
     if first < MIN_STAGE_FRACTION * nominal and len(dts) > 1:
         dts = dts[1:]
@@ -70,11 +77,11 @@ def shift_plan(base: Problem, plan: Plan | None, t_s: float, x0: np.ndarray, uni
         maps = None if maps is None else maps.tail(k0 + 1, first_valid=False)
     else:
         maps = None if maps is None else maps.tail(
-            k0, first_valid=abs(first - dts[0]) <= TIME_TOLERANCE_S)
+            k0, first_valid=abs(first - dts[0]) <= tolerance)
         dts[0] = first
     arrival = len(dts) < MIN_STAGES_LEFT
     if arrival:
-        # re-grid the time to go into MIN_STAGES_LEFT equal stages, warm-started from the
+        # re-grid what is left into MIN_STAGES_LEFT equal stages, warm-started from the
         # plan's stage at each new stage's midpoint
         total = float(np.sum(dts))
         mids = (np.arange(MIN_STAGES_LEFT) + 0.5) * total / MIN_STAGES_LEFT
@@ -84,7 +91,7 @@ def shift_plan(base: Problem, plan: Plan | None, t_s: float, x0: np.ndarray, uni
         maps = None
         lam = None if lam is None else lam[:, idx]
     duals = None if lam is None else {"lam": lam, "lam_t": plan.solution.duals.get("lam_t", [])}
-    problem = base.with_x0(x0, dts / units.tu_s)
+    problem = base.with_x0(x0, *grid.problem_grid(dts, s0))
     if arrival:
         problem = arrival_constraints(problem, arrival_tolerance_m, units)
     return Shifted(problem, WarmStart(U, duals, plan.solution.rho, maps), arrival)
@@ -102,8 +109,8 @@ def arrival_constraints(problem: Problem, tolerance_m: float, units: Units) -> P
     the constraint only turns active (Newton) within 10 % of R.
     """
     gt, _ = problem.terminal_constraints(problem.x_target)
-    if not tolerance_m or gt is None or gt.shape != (6,):
-        return problem
+    if not tolerance_m or gt is None or gt.shape != (6,) or problem.time_index is not None:
+        return problem   # (an Earth-centred arrival is an orbit, not a position)
     R = float(units.length(tolerance_m))
     scale = float(units.speed(ARRIVAL_SPEED_SCALE_M_S))
     floor2 = (1e-3 * R) ** 2

@@ -38,11 +38,11 @@ class TruthSim:
         self.units = self.case.units
         self.errors = errors
         self.rng = np.random.default_rng(seed)
-        self.x = self.case.x0.copy()        # normalised truth
+        self.x = self.case.cartesian_x0()   # normalised Cartesian truth [r, v, m]
         if initial_offset_si is not None and np.any(initial_offset_si):
-            x_si = self.units.states_si(self.x)
+            x_si = self.units.cartesian_si(self.x)
             x_si[:6] += np.asarray(initial_offset_si, dtype=float)
-            self.x = self.units.states_normalised(x_si)
+            self.x = self.units.cartesian_normalised(x_si)
         self.outage_s = outage_s
         self.t_s = t0_s
         self.t0_s = t0_s
@@ -53,7 +53,7 @@ class TruthSim:
 
     def truth_si(self):
         """(position m, velocity m/s, mass kg) of the truth."""
-        x = self.units.states_si(self.x)
+        x = self.units.cartesian_si(self.x)
         return x[:3], x[3:6], float(x[6])
 
     def estimate_si(self):

@@ -437,9 +437,76 @@ def test_warm_replans_optimise_the_cost_their_loaded_plan_was_solved_for():
     assert pl.policy.cold.homotopy[-1] == case_last
 
 
-def test_an_earth_centred_scenario_is_refused_by_name():
-    """The node's estimates and plans are Cartesian and staged in time: an Earth-centred
-    scenario (elements staged in true longitude) is refused before anything is built, saying
-    where it can be solved."""
-    with pytest.raises(DaddyError, match="'leo_leo' is Earth-centred .*daddy solve"):
-        GuidancePlanner("leo_leo")
+@pytest.fixture(scope="module")
+def earth_planner(tmp_path_factory):
+    """An Earth-centred scenario no issue names, as a user case file: the catalogue's LEO
+    spacecraft raising its orbit by 10 km in a day (155 stages of 36 deg), energy-optimal,
+    with its cold plan from the departure state at T0_S."""
+    from daddy_core.catalogue.cases import CASES_DIR
+    d = json.loads((CASES_DIR / "leo_leo.json").read_text())
+    d.update(name="leo_raise", tof_days=1.0, x_target=[6788.0, 0, 51.0, 145.0, 0, 0])
+    path = tmp_path_factory.mktemp("earth") / "leo_raise.json"
+    path.write_text(json.dumps(d))
+    pl = GuidancePlanner(str(path), thrust_margin=0.0, fuel_optimal=False)
+    x = pl.units.cartesian_si(pl.case.cartesian_x0())
+    out = pl.replan(x[:3], x[3:6], x[6], T0_S)
+    assert out.ok and out.level == "OK", out.reason
+    return pl
+
+
+def test_an_earth_centred_scenario_plans_from_cartesian_estimates(earth_planner):
+    """Estimates are Cartesian (ECI, SI) for every scenario: an Earth-centred plan starts at the
+    estimate, its stages of true longitude become durations (summing to the time of flight),
+    its states are Cartesian, and its thrust -- in the osculating orbit's RTN axes -- is
+    commanded in the inertial frame, turned with the estimate's orbit."""
+    from daddy_core.dynamics import models
+    pl = earth_planner
+    plan = pl.plan
+    x = pl.units.cartesian_si(pl.case.cartesian_x0())
+    assert plan.thrust_rtn and len(plan.stage_dt_s) == 155
+    assert plan.stage_dt_s.sum() == pytest.approx(86400.0, abs=1e-3)
+    np.testing.assert_allclose(plan.states_si[0, :3], x[:3], atol=1e-6)
+    t = plan.epoch_s + 0.3 * plan.stage_dt_s[0]
+    command = plan.command_at(t, x[:3], x[3:6])
+    np.testing.assert_allclose(command, models.rtn_basis(x[:3], x[3:6]) @ plan.thrust_n[0])
+    assert np.linalg.norm(command) == pytest.approx(np.linalg.norm(plan.thrust_n[0]))
+    assert abs(x[:3] @ x[3:6]) < 1e-6 * np.linalg.norm(x[:3]) * np.linalg.norm(x[3:6])
+
+
+def test_an_earth_centred_plan_is_re_planned_warm_from_a_perturbed_estimate(earth_planner):
+    """After 5 % of the flight, flown in Cartesian coordinates in time with the plan's thrust
+    (``self_trigger.propagate``, the node's own prediction: it meets the plan's next node to
+    a few cm), an estimate 1 km and 1 m/s off: the warm re-plan starts at the estimate's true
+    longitude mid-stage, keeps the arrival time and reaches the target orbit."""
+    from daddy_ros.self_trigger import propagate
+    pl = earth_planner
+    plan, case, u = pl.plan, pl.case, pl.units
+    k = int(0.05 * len(plan.stage_dt_s))
+    x, t = case.cartesian_x0(), plan.epoch_s
+    for j in range(k):
+        x = propagate(case, x, plan.thrust_n[j], plan.stage_dt_s[j])
+        t += plan.stage_dt_s[j]
+    node = u.cartesian_si(propagate(case, x, plan.thrust_n[k], plan.stage_dt_s[k]))
+    assert np.linalg.norm(node[:3] - plan.states_si[k + 1, :3]) < 0.1
+    x = u.cartesian_si(propagate(case, x, plan.thrust_n[k], 0.4 * plan.stage_dt_s[k]))
+    t += 0.4 * plan.stage_dt_s[k]
+    rng = np.random.default_rng(3)
+    dr, dv = (d / np.linalg.norm(d) for d in rng.normal(size=(2, 3)))
+    out = pl.replan(x[:3] + 1000.0 * dr, x[3:6] + 1.0 * dv, x[6], t)
+    assert out.ok and out.warm_start and out.level == "OK", out.reason
+    new = pl.plan
+    assert len(new.stage_dt_s) == len(plan.stage_dt_s) - k
+    assert new.end_s == pytest.approx(plan.end_s, abs=1e-3)
+    np.testing.assert_allclose(new.states_si[0, :3], x[:3] + 1000.0 * dr, atol=1e-6)
+    sol = new.solution
+    assert sol.converged and sol.max_violation <= 1e-10
+    assert sol.elements[-1, 0] == pytest.approx(6788.0, abs=1e-6)
+    assert sol.elements[-1, 2] == pytest.approx(51.0, abs=1e-8)
+
+
+def test_an_estimate_off_any_closed_orbit_is_refused_for_an_earth_scenario(earth_planner):
+    checks = earth_planner.checks
+    with pytest.raises(InputRejected, match="inside the Earth"):
+        checks.check_estimate([6000e3, 0, 0], [0, 7000.0, 0], T0_S)
+    with pytest.raises(InputRejected, match="not a closed orbit"):
+        checks.check_estimate([7000e3, 0, 0], [0, 11_000.0, 0], T0_S)

@@ -106,10 +106,29 @@ class Case:
             return models.two_body(self.units.gm, c)
         if self.system == "earth_moon_cr3bp":
             return models.cr3bp(self.units.gm, c)
-        if Perturbation.J2 in self.perturbations:
-            return models.equinoctial_sundman(self.units.gm, c, EARTH_J2,
-                                              EARTH_J2_RADIUS_KM / self.units.lu_km)
-        return models.equinoctial_sundman(self.units.gm, c)
+        return models.equinoctial_sundman(self.units.gm, c, *self._j2())
+
+    def cartesian_rhs(self) -> models.Dynamics | None:
+        """The right-hand side in time of the Cartesian state [r, v, m] (normalised), thrust as
+        ``rhs`` takes it: ``rhs`` itself for the Cartesian systems, ``models.earth_cartesian``
+        (thrust in RTN) for Earth-centred ones -- what a navigation estimate is propagated with."""
+        if not self.staged_in_angle:
+            return self.rhs()
+        return models.earth_cartesian(self.units.gm, self.spacecraft.exhaust_speed(self.units),
+                                      *self._j2())
+
+    def cartesian_x0(self) -> np.ndarray:
+        """The initial state as ``cartesian_rhs`` takes it, [r, v, m] (7,) normalised."""
+        if not self.staged_in_angle:
+            return self.x0.copy()
+        return np.append(models.mee_to_cartesian(self.x0[:5], self.t_start, self.units.gm),
+                         self.x0[6])
+
+    def _j2(self) -> tuple[float, float]:
+        """(J2, its reference radius normalised) of an Earth-centred case; zeros without J2."""
+        if Perturbation.J2 not in self.perturbations:
+            return 0.0, 0.0
+        return EARTH_J2, EARTH_J2_RADIUS_KM / self.units.lu_km
 
 
 def list_cases() -> list[str]:

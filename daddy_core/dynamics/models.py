@@ -201,6 +201,38 @@ def equinoctial_sundman(gm: float, exhaust_speed: float, j2: float = 0.0, j2_rad
     return _indexed(rhs, SUNDMAN_MAX_STEP)
 
 
+def rtn_basis(r, v) -> np.ndarray:
+    """(3, 3) columns: the radial, transverse and normal unit vectors of the osculating orbit
+    of position r and velocity v (3,) (floats): an RTN vector w is ``rtn_basis(r, v) @ w`` in
+    the inertial frame."""
+    r, v = np.asarray(r, float), np.asarray(v, float)
+    h = np.cross(r, v)
+    radial, normal = r / np.linalg.norm(r), h / np.linalg.norm(h)
+    return np.column_stack([radial, np.cross(normal, radial), normal])
+
+
+def earth_cartesian(gm: float, exhaust_speed: float, j2: float = 0.0, j2_radius: float = 0.0):
+    """The Earth-centred problem in Cartesian coordinates and in time, rhs(t, x, u): x = [r (3),
+    v (3), m] in the inertial frame of the equinoctial elements, u the thrust in RTN (as
+    ``equinoctial_sundman`` takes it), J2 as the gradient of the zonal potential, -3/2 J2 gm
+    R^2 / r^5 [x (1 - 5 z^2/r^2), y (1 - 5 z^2/r^2), z (3 - 5 z^2/r^2)]. For floats: what the
+    guidance loop propagates between estimates (the Sundman model's independent variable is
+    the true longitude, an estimate's is the time)."""
+    inv_c = -1.0 / exhaust_speed
+    j2c = -1.5 * gm * j2 * j2_radius ** 2
+
+    def rhs(t, x, u):
+        r, v, m = np.asarray(x[:3], float), np.asarray(x[3:6], float), float(x[6])
+        rn = math.sqrt(r @ r)
+        acc = r * (-gm / rn ** 3) + rtn_basis(r, v) @ np.asarray(u[:3], float) / m
+        if j2c:
+            z2 = (r[2] / rn) ** 2
+            acc = acc + (j2c / rn ** 5) * np.array([r[0] * (1 - 5 * z2), r[1] * (1 - 5 * z2),
+                                                    r[2] * (3 - 5 * z2)])
+        return np.concatenate([v, acc, [float(_magnitude(u)) * inv_c]])
+    return Dynamics(rhs, prepare_control=with_thrust_magnitude)
+
+
 def keplerian_to_equinoctial(a, e, i_rad, raan_rad, argp_rad, nu_rad):
     """Keplerian elements -> [a, p, q, r, s, L] (paper eq. 21), true longitude L: the modified
     elements' f, g, h, k in the paper's order and names (p = g, q = f, r = k, s = h)."""

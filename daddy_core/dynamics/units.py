@@ -104,16 +104,31 @@ class Units:
         """The inverse of ``states_si``."""
         return self._convert_states(X_si, self.length, self.speed, self.time, self.mass)
 
-    def _convert_states(self, X, length, speed, time, mass) -> np.ndarray:
+    def cartesian_si(self, X) -> np.ndarray:
+        """Normalised Cartesian states (..., 6 or 7) [r, v, (m)] -> SI [m, m/s, (kg)], whatever
+        the system's own state (Earth-centred: the states of ``models.earth_cartesian``)."""
+        return self._convert_cartesian(X, self.length_m, self.speed_m_s, self.mass_kg)
+
+    def cartesian_normalised(self, X_si) -> np.ndarray:
+        """The inverse of ``cartesian_si``."""
+        return self._convert_cartesian(X_si, self.length, self.speed, self.mass)
+
+    @staticmethod
+    def _convert_cartesian(X, length, speed, mass) -> np.ndarray:
         X = np.array(X, dtype=float)
-        if self.name in CARTESIAN_SYSTEMS:
-            X[..., :3] = length(X[..., :3])
-            X[..., 3:6] = speed(X[..., 3:6])
-        else:
-            X[..., 0] = length(X[..., 0])
-            if X.shape[-1] == 7:
-                X[..., 5] = time(X[..., 5])
+        X[..., :3] = length(X[..., :3])
+        X[..., 3:6] = speed(X[..., 3:6])
         if X.shape[-1] == 7:
+            X[..., 6] = mass(X[..., 6])
+        return X
+
+    def _convert_states(self, X, length, speed, time, mass) -> np.ndarray:
+        if self.name in CARTESIAN_SYSTEMS:
+            return self._convert_cartesian(X, length, speed, mass)
+        X = np.array(X, dtype=float)
+        X[..., 0] = length(X[..., 0])
+        if X.shape[-1] == 7:
+            X[..., 5] = time(X[..., 5])
             X[..., 6] = mass(X[..., 6])
         return X
 
