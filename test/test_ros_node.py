@@ -466,3 +466,46 @@ def test_node_replans_by_itself_on_drift_and_answers_the_estimate_after_it(graph
         spin.shutdown()
         node.stop()
         node.destroy_node()
+
+
+def test_an_earth_centred_scenario_is_flown_from_eci_odometry(graph, tmp_path):
+    """An Earth-centred scenario (a user case file: the LEO spacecraft raising its orbit by
+    10 km in a day, energy-optimal) over the graph: an ECI Odometry at departure gets a
+    schedule whose efforts are in the osculating orbit's RTN axes (frame ``eci_rtn``), and a
+    thrust command in ECI, the schedule's first effort turned by the estimate's RTN axes."""
+    import json
+
+    from daddy_core.catalogue.cases import CASES_DIR
+    from daddy_core.dynamics import models
+    from daddy_ros.spin import SpinThread
+    d = json.loads((CASES_DIR / "leo_leo.json").read_text())
+    d.update(name="leo_raise", tof_days=1.0, x_target=[6788.0, 0, 51.0, 145.0, 0, 0])
+    path = tmp_path / "leo_raise.json"
+    path.write_text(json.dumps(d))
+    node = GuidanceNode(namespace="/leo", scenario=str(path), frame_id="eci",
+                        fuel_optimal=False, self_replan=False, thrust_margin=0.0)
+    spin = SpinThread(node)
+    c = GuidanceClient("eci", name="daddy_earth_client", namespace="/leo")
+    try:
+        x = node.planner.units.cartesian_si(node.planner.case.cartesian_x0())
+        end = time.monotonic() + 60
+        while time.monotonic() < end and not c.schedules:
+            c.publish_estimate(x[:3], x[3:6], x[6], T0)
+            c.request("leo-1", T0)
+            c.wait_for(lambda: c.schedules, 2.0)
+        assert c.schedules, "no schedule for the Earth-centred scenario"
+        msg = c.schedules[-1][1]
+        assert msg.header.frame_id == "eci_rtn" and len(msg.points) == 155
+        c.publish_estimate(x[:3], x[3:6], x[6], T0 + 10.0)
+        assert c.wait_for(lambda: [m for _, m in c.thrust
+                                   if cv.stamp_to_s(m.header.stamp) == T0 + 10.0], 10.0)
+        cmd = [m for _, m in c.thrust if cv.stamp_to_s(m.header.stamp) == T0 + 10.0][-1]
+        assert cmd.header.frame_id == "eci"
+        expected = models.rtn_basis(x[:3], x[3:6]) @ np.array(msg.points[0].effort)
+        np.testing.assert_allclose([cmd.vector.x, cmd.vector.y, cmd.vector.z], expected,
+                                   rtol=1e-9, atol=1e-12)
+    finally:
+        c.close()
+        spin.shutdown()
+        node.stop()
+        node.destroy_node()
