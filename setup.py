@@ -10,7 +10,8 @@ setup(
     name=package_name,
     version="0.1.0",
     packages=find_packages(include=["daddy_core", "daddy_core.*", "daddy_ros", "daddy_ros.*"]),
-    package_data={"daddy_core.catalogue": ["cases/*.json"], "daddy_ros": ["plans/*.json"]},
+    package_data={"daddy_core.catalogue": ["cases/*.json", "run_times.json"],
+                  "daddy_ros": ["plans/*.json"]},
     data_files=[
         ("share/ament_index/resource_index/packages", ["resource/" + package_name]),
         ("share/" + package_name, ["package.xml"]),

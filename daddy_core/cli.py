@@ -14,6 +14,7 @@ import numpy as np
 from . import trajectory_output
 from .errors import DaddyError
 from .catalogue import list_cases, load_case, problem_from_case
+from .catalogue.run_times import expected_run_time, measured_on
 from .solver import METHODS, Globalization, Solution, case_options, solve
 
 
@@ -63,7 +64,11 @@ def main(argv=None) -> int:
         for name in list_cases():
             c = load_case(name)
             revs = "" if c.revolutions is None else f", {c.revolutions:.1f} revolutions"
-            print(f"{name:16s} N = {c.stages}{revs}: {c.description}")
+            expected = expected_run_time(name)
+            print(f"{name:16s} N = {c.stages}{revs}: {c.description}"
+                  + (f" [expected: {expected}]" if expected else ""))
+        if measured_on():
+            print(f"(expected run times {measured_on()}: bench/bench_catalogue.py)")
         return 0
     try:
         case = load_case(args.case)

@@ -63,7 +63,8 @@ class EstimateChecks:
     def check_state(self, pos_m, vel_m_s, mass_kg, stamp_s: float,
                     now_s: float | None = None) -> np.ndarray:
         """All checks of one estimate used at time now_s; returns the normalised Cartesian
-        state [r, v, m] (7,) (``frames`` maps it onto the scenario's own state). Raises InputRejected (naming the field) for an estimate the planner must not use."""
+        state [r, v, m] (7,) (``frames`` maps it onto the scenario's own state). Raises
+        InputRejected (naming the field) for an estimate the planner must not use."""
         self.check_estimate(pos_m, vel_m_s, stamp_s)
         self.check_mass(mass_kg)
         if now_s is not None:

@@ -5,7 +5,7 @@ a problem's state and stages are its own: Cartesian states on stages of time for
 Earth-Moon-system scenarios (``CartesianGrid``), modified equinoctial elements, time and mass on
 stages of true longitude for the Earth-centred ones (``LongitudeGrid``, Sundman-transformed
 stages: ``models.equinoctial_sundman``). A grid says where an estimate lies along the plan's
-stages (``position``), where the stages end (``ends``) and how a remaining part becomes a
+stages (``state``), where the stages end (``ends``) and how a remaining part becomes a
 problem's stage lengths and start (``problem_grid``); ``shift.shift_plan`` cuts the plan with
 them, the same way for both.
 """
@@ -81,4 +81,3 @@ class LongitudeGrid:
 def grid_of(case: Case) -> CartesianGrid | LongitudeGrid:
     """The stage grid of a scenario."""
     return LongitudeGrid(case) if case.staged_in_angle else CartesianGrid(case)
-

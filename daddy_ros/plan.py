@@ -136,7 +136,6 @@ class Plan:
         k = int(np.searchsorted(np.cumsum(self.stage_dt_s), rel, side="right"))
         return self.thrust_n[min(k, len(self.thrust_n) - 1)].copy()
 
-
     def command_at(self, t_s: float, pos_m, vel_m_s) -> np.ndarray:
         """The thrust command [N] at time t in the scenario's frame, for a spacecraft at
         position pos_m and velocity vel_m_s (an RTN plan's thrust turns with the orbit: its

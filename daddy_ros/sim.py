@@ -8,6 +8,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from daddy_core.catalogue import load_case
+from daddy_core.errors import DaddyError
 
 from .self_trigger import propagate
 
@@ -99,6 +100,10 @@ class TruthSim:
         return propagate(self.case, x, thrust_n, dt_s)
 
     def miss(self):
-        """(position miss m, velocity miss m/s) with respect to the case target."""
+        """(position miss m, velocity miss m/s) with respect to the case target (a Cartesian
+        state: an Earth-centred case's target is an orbit, whose miss is the elements')."""
+        if self.case.staged_in_angle:
+            raise DaddyError(f"TruthSim.miss: {self.case.name!r} arrives on an orbit, not at a "
+                             "state; compare its elements (models.cartesian_to_mee)")
         d = self.units.states_si(self.x - self.case.x_target)
         return float(np.linalg.norm(d[:3])), float(np.linalg.norm(d[3:6]))

@@ -211,8 +211,9 @@ def test_sundman_elements_with_j2_match_a_cartesian_propagation_and_regress_the_
     """J2 in the Sundman-transformed Gauss equations against the J2 acceleration written in
     Cartesian coordinates (the gradient of the zonal potential, a = -3/2 J2 mu R^2 / r^5 [x (1 -
     5 z^2/r^2), y (1 - 5 z^2/r^2), z (3 - 5 z^2/r^2)]) with RTN thrust, over three revolutions
-    of an inclined eccentric LEO: position to 1 cm (without J2: tens of km off); and ballistic, the node regresses at the
-    secular rate -3/2 n J2 (R/p)^2 cos i (Vallado eq. 9-41) over ten revolutions, to 1 %."""
+    of an inclined eccentric LEO: position to 1 cm (without J2: tens of km off); and
+    ballistic, the node regresses at the secular rate -3/2 n J2 (R/p)^2 cos i (Vallado eq.
+    9-41) over ten revolutions, to 1 %."""
     from daddy_core.dynamics.units import EARTH_J2, EARTH_J2_RADIUS_KM
     units = earth_units()
     gm, c, R = units.gm, 40.0, EARTH_J2_RADIUS_KM / units.lu_km
