@@ -14,6 +14,7 @@ import numpy as np
 from . import trajectory_output
 from .errors import DaddyError
 from .catalogue import list_cases, load_case, problem_from_case
+from .catalogue.revolutions import RevolutionSearch, search_revolutions
 from .catalogue.run_times import expected_run_time, measured_on
 from .solver import METHODS, Globalization, Solution, case_options, solve
 
@@ -44,6 +45,11 @@ def _parser() -> argparse.ArgumentParser:
     s.add_argument("--globalization", choices=[g.value for g in Globalization],
                    help="DDP step control (default: the solver's)")
     s.add_argument("--time-budget", type=float, metavar="S", help="wall-clock budget in seconds")
+    s.add_argument("--search-revolutions", type=float, metavar="SPAN",
+                   help="Earth-centred cases: search the transfer's revolutions within SPAN "
+                        "around the case's own for the heaviest final mass (golden section)")
+    s.add_argument("--search-tol", type=float, default=None, metavar="REVS",
+                   help="the search's final bracket in revolutions (default SPAN / 20)")
     s.add_argument("--quiet", action="store_true", help="no progress lines")
     sub.add_parser("list", help="list the catalogue cases")
     return ap
@@ -89,8 +95,18 @@ def main(argv=None) -> int:
                 guess = float(case.units.thrust(guess))
             u0 = np.full((problem.N, problem.nu), guess)
         progress = None if args.quiet else (lambda line: print(line, flush=True))
-        sol = solve(problem, u0, method=args.method, fuel_optimal=fuel, polish=not args.no_polish,
-                    options=opts, case_name=case.name, progress=progress)
+        if args.search_revolutions:
+            found = _search(case, fuel, args)
+            if found.best is None:
+                print("daddy: not converged: no solve of the search was feasible",
+                      file=sys.stderr)
+                return 1
+            sol = found.best
+            problem = problem_from_case(case.with_revolutions(found.revolutions))
+        else:
+            sol = solve(problem, u0, method=args.method, fuel_optimal=fuel,
+                        polish=not args.no_polish, options=opts, case_name=case.name,
+                        progress=progress)
     except DaddyError as exc:
         print(f"daddy: error: {exc}", file=sys.stderr)
         return 2
@@ -111,6 +127,27 @@ def main(argv=None) -> int:
         print(f"daddy: not converged: {sol.reason}", file=sys.stderr)
         return 1
     return 0
+
+
+def _search(case, fuel: bool, args) -> RevolutionSearch:
+    """``--search-revolutions``: the search, its trials printed as they are solved."""
+    if args.stages or args.warm_start or args.time_budget or args.globalization or args.no_polish:
+        raise DaddyError("--search-revolutions solves from the case's cold guess with its own "
+                         "stages and the default options: drop --stages, --warm-start, "
+                         "--time-budget, --globalization and --no-polish")
+    span = args.search_revolutions
+    tol = args.search_tol or span / 20.0
+    if not (span > 0 and tol > 0):
+        raise DaddyError(f"--search-revolutions and --search-tol must be positive, got {span!r} "
+                         f"and {tol!r}")
+    print(f"searching {case.revolutions - span / 2:.4f}-{case.revolutions + span / 2:.4f} "
+          f"revolutions (bracket {tol:g}):", flush=True)
+    found = search_revolutions(case, fuel, span, tol, args.method,
+                               None if args.quiet else (lambda line: print(line, flush=True)))
+    if found.best is not None:
+        print(f"best: {found.revolutions:.4f} revolutions, {found.best.final_mass_kg:.3f} kg "
+              f"({len(found.trials)} solves, {sum(t.cpu_s for t in found.trials):.1f} s CPU)")
+    return found
 
 
 def _report(sol: Solution) -> None:

@@ -172,3 +172,24 @@ def test_states_convert_to_si_and_back_for_every_system(name):
         assert si[6] == pytest.approx(c.spacecraft.wet_mass_kg)
     batch = u.states_si(np.stack([c.x0, c.x0]))                    # (..., nx) arrays alike
     np.testing.assert_array_equal(batch[1], si)
+
+
+def test_daddy_list_shows_each_case_with_its_measured_run_time(capsys):
+    """`daddy list` names every case with its stage count and the run times measured by
+    bench/bench_catalogue.py (catalogue/run_times.json: every case's energy-optimal solve, the
+    fuel-optimal one where the case has a spacecraft), a fuel solve that did not converge
+    within the bench's cap said as such, and the machine and date of the measurement."""
+    from daddy_core.catalogue.run_times import RUN_TIMES_FILE, expected_run_time
+    from daddy_core.cli import main
+    measured = json.loads(RUN_TIMES_FILE.read_text())
+    assert set(measured["cases"]) == set(list_cases())
+    for name, runs in measured["cases"].items():
+        assert "energy" in runs and ("fuel" in runs) == (load_case(name).spacecraft is not None)
+        for r in runs.values():
+            text = expected_run_time(name)
+            assert (f"{r['cpu_s']:.3g} s" if r["converged"] else "not converged in") in text
+    assert main(["list"]) == 0
+    out = capsys.readouterr().out
+    assert all(line.split()[0] in measured["cases"] and "[expected: energy" in line
+               for line in out.splitlines()[:-1])
+    assert out.splitlines()[-1].startswith(f"(expected run times measured on {measured['machine']}")

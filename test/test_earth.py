@@ -164,3 +164,31 @@ def test_violations_of_an_earth_case_are_named_by_element():
     assert labels["g_teq[5]"] == "arrival time" and labels["g_ineq[1]"] == "dry mass"
     from daddy_core.solver.solve import _describe
     assert _describe(report[0]).startswith(f"{report[0]['name']} ({report[0]['label']}) ")
+
+
+def test_a_search_over_the_revolutions_keeps_the_heaviest_feasible_transfer(tmp_path, capsys):
+    """`daddy solve --search-revolutions`: the arrival anywhere on the target orbit leaves the
+    total angle free; the golden-section search solves the case's own 15.54 revolutions first
+    and then neighbours within the span (warm-started), keeps the heaviest feasible one --
+    no lighter than the case's own -- and writes it, its stages spanning the revolutions
+    found."""
+    d = json.loads((CASES_DIR / "leo_leo.json").read_text())
+    d.update(name="leo_raise", tof_days=1.0, x_target=[6788.0, 0, 51.0, 145.0, 0, 0])
+    path = tmp_path / "raise.json"
+    path.write_text(json.dumps(d))
+    own = case_from_dict(d).revolutions
+    code = cli_main(["solve", str(path), "--energy", "--search-revolutions", "0.04",
+                     "--search-tol", "0.01", "--json", str(tmp_path / "best.json")])
+    out = capsys.readouterr().out
+    assert code == 0, out
+    lines = [line for line in out.splitlines() if line.startswith("  ") and "stages):" in line]
+    masses = {float(line.split()[0]): float(line.split(":")[1].split()[0]) for line in lines
+              if " kg" in line}
+    assert float(lines[0].split()[0]) == pytest.approx(own, abs=1e-4) and len(lines) >= 4
+    assert all(abs(r - own) <= 0.02 + 1e-9 for r in masses)
+    best = Solution.from_json(tmp_path / "best.json")
+    assert best.final_mass_kg == pytest.approx(max(masses.values()), abs=1e-3)
+    assert best.final_mass_kg >= masses[float(lines[0].split()[0])] - 1e-9
+    found = float(out.split("best: ")[1].split()[0])
+    assert best.stage_dt.sum() == pytest.approx(2 * np.pi * found, rel=1e-3)
+    assert best.max_violation <= 1e-9

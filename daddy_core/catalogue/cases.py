@@ -21,7 +21,7 @@ from __future__ import annotations
 
 import json
 import math
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from enum import Enum
 from pathlib import Path
 
@@ -65,6 +65,7 @@ class Case:
             2 pi revolutions of true longitude); None for cases staged in time.
         t_start: the true longitude of x0 for Earth-centred cases [rad], else 0.
         perturbations: the forces beyond point-mass gravity and thrust (Earth-centred cases).
+        stages_per_revolution: Earth-centred cases: the stage density (None otherwise).
     """
 
     name: str
@@ -81,11 +82,24 @@ class Case:
     revolutions: float | None = None
     t_start: float = 0.0
     perturbations: frozenset = frozenset()
+    stages_per_revolution: int | None = None
 
     @property
     def staged_in_angle(self) -> bool:
         """The stages are arcs of true longitude (Sundman-transformed), not durations."""
         return self.revolutions is not None
+
+    def with_revolutions(self, revolutions: float) -> "Case":
+        """The same Earth-centred transfer over another total angle (its stage density kept):
+        the arrival anywhere on the target orbit makes the angle a free choice, which
+        ``catalogue.revolutions.search_revolutions`` searches."""
+        if not self.staged_in_angle:
+            raise DaddyError(f"case {self.name!r} is staged in time: only Earth-centred cases "
+                             "have a number of revolutions")
+        if not (revolutions > 0 and math.isfinite(revolutions)):
+            raise DaddyError(f"revolutions must be a positive number, got {revolutions!r}")
+        return replace(self, revolutions=float(revolutions),
+                       stages=max(1, round(revolutions * self.stages_per_revolution)))
 
     def stage_lengths(self, stages: int | None = None) -> np.ndarray:
         """(N,) equal stage lengths: normalised durations, or angles [rad] for Earth-centred
@@ -236,7 +250,8 @@ def _earth_case(d: dict, name: str, units: Units, spacecraft: Spacecraft, x0: np
                 units=units, spacecraft=spacecraft, x0=np.concatenate([mee0, [0.0, m0]]),
                 x_target=np.concatenate([mee_t, [tof, m0]]), tof=tof, stages=stages,
                 problem=dict(d.get("problem", {})), solver=dict(d.get("solver", {})),
-                revolutions=float(revs), t_start=L0, perturbations=perturbations)
+                revolutions=float(revs), t_start=L0, perturbations=perturbations,
+                stages_per_revolution=spr)
 
 
 def _perturbations(names) -> frozenset:
