@@ -24,11 +24,11 @@ MU_MOON_KM3_S2 = 4_902.80
 EARTH_MOON_KM = 384_399.0
 # mean body radii (the guidance node's domain checks)
 EARTH_RADIUS_KM = 6378.1
+MOON_RADIUS_KM = 1737.4
 # the Earth's second zonal harmonic and the reference radius it goes with (EGM96 / WGS 84, as
 # tabulated by Vallado, Fundamentals of Astrodynamics, 4th ed., App. D)
 EARTH_J2 = 1.08262668e-3
 EARTH_J2_RADIUS_KM = 6378.137
-MOON_RADIUS_KM = 1737.4
 # systems whose states are Cartesian [r (3), v (3), (m)]; the Earth-centred one's are modified
 # equinoctial elements, time and mass [p, f, g, h, k, t, m] (``models.equinoctial_sundman``)
 CARTESIAN_SYSTEMS = ("sun_two_body", "earth_moon_cr3bp", "double_integrator")
