@@ -23,17 +23,16 @@ from datetime import date
 from pathlib import Path
 
 from daddy_core.catalogue import list_cases, load_case
-from daddy_core.catalogue.run_times import RUN_TIMES_FILE
+from daddy_core.catalogue.run_times import RUN_TIMES_FILE, read_run_times
 
 SOLVE = """
 import json, sys, time
 from daddy_core.catalogue import load_case, problem_from_case
 from daddy_core.solver import case_options, solve
-import numpy as np
 case = load_case(sys.argv[1]); fuel = sys.argv[2] == "fuel"
 t = time.process_time()
 problem = problem_from_case(case)
-u0 = np.full((problem.N, problem.nu), float(case.units.thrust(1e-6)) if case.spacecraft else 1e-6)
+u0 = case.cold_guess(problem.N)
 sol = solve(problem, u0, fuel_optimal=fuel, options=case_options(case, fuel,
             time_budget_s=float(sys.argv[3])))
 print(json.dumps({"cpu_s": round(time.process_time() - t, 1), "converged": sol.converged,
@@ -65,11 +64,11 @@ def main() -> None:
     t = time.perf_counter()
     with ThreadPoolExecutor(args.jobs) as pool:
         results = list(pool.map(lambda w: (w, run(*w, args.cap)), work))
-    table = json.loads(RUN_TIMES_FILE.read_text()) if RUN_TIMES_FILE.exists() else {"cases": {}}
+    table = read_run_times()
     for (case, kind), r in results:
         print(f"{case:16s} {kind:6s} {r['cpu_s']:7.1f} s  converged {r['converged']!s:5s} "
               f"{r['final_mass_kg']}  {'' if r['converged'] else r['reason']}")
-        table["cases"].setdefault(case, {})[kind] = r
+        table.setdefault("cases", {}).setdefault(case, {})[kind] = r
     machine = (f"{platform.processor() or platform.machine()}, {os.cpu_count()} cores, "
                f"{args.jobs} solves at a time")
     print(f"machine: {machine}; {time.perf_counter() - t:.0f} s in all")

@@ -103,7 +103,7 @@ def main() -> None:
     case = load_case(args.case)
     problem = problem_from_case(case)
     N = problem.N
-    U0 = np.full((N, 3), float(case.units.thrust(1e-6)))
+    U0 = case.cold_guess(N)
     print(f"machine: {platform.processor() or platform.machine()}, {os.cpu_count()} cores; "
           f"case {case.name}, {N} stages")
 

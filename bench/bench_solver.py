@@ -25,7 +25,7 @@ CASES = [("earth_mars", False, 1.5, 0.43), ("earth_mars", True, 3.8, 1.1),
 def run(name, fuel, method):
     case = load_case(name)
     prob = problem_from_case(case)
-    u0 = np.full((prob.N, 3), float(case.units.thrust(case.solver.get("u_guess_n", 1e-6))))
+    u0 = case.cold_guess(prob.N)
     w0, c0 = time.perf_counter(), time.process_time()
     sol = solve(prob, u0, method=method, fuel_optimal=fuel, options=case_options(case, fuel))
     return sol, time.perf_counter() - w0, time.process_time() - c0

@@ -9,13 +9,11 @@ import argparse
 import sys
 from datetime import datetime, timezone
 
-import numpy as np
-
 from . import trajectory_output
 from .errors import DaddyError
 from .catalogue import list_cases, load_case, problem_from_case
 from .catalogue.revolutions import RevolutionSearch, search_revolutions
-from .catalogue.run_times import expected_run_time, measured_on
+from .catalogue.run_times import expected_run_time, measured_on, read_run_times
 from .solver import METHODS, Globalization, Solution, case_options, solve
 
 
@@ -67,14 +65,15 @@ def _utc(text: str) -> datetime:
 def main(argv=None) -> int:
     args = _parser().parse_args(argv)
     if args.command == "list":
+        run_times = read_run_times()
         for name in list_cases():
             c = load_case(name)
             revs = "" if c.revolutions is None else f", {c.revolutions:.1f} revolutions"
-            expected = expected_run_time(name)
+            expected = expected_run_time(run_times, name)
             print(f"{name:16s} N = {c.stages}{revs}: {c.description}"
                   + (f" [expected: {expected}]" if expected else ""))
-        if measured_on():
-            print(f"(expected run times {measured_on()}: bench/bench_catalogue.py)")
+        if measured_on(run_times):
+            print(f"(expected run times {measured_on(run_times)}: bench/bench_catalogue.py)")
         return 0
     try:
         case = load_case(args.case)
@@ -90,10 +89,7 @@ def main(argv=None) -> int:
         if args.warm_start:
             u0 = Solution.from_json(args.warm_start).U
         else:
-            guess = case.solver.get("u_guess_n", 1e-6)
-            if case.spacecraft is not None:
-                guess = float(case.units.thrust(guess))
-            u0 = np.full((problem.N, problem.nu), guess)
+            u0 = case.cold_guess(problem.N)
         progress = None if args.quiet else (lambda line: print(line, flush=True))
         if args.search_revolutions:
             found = _search(case, fuel, args)

@@ -15,6 +15,7 @@ import math
 
 import numpy as np
 
+from daddy_core import trajectory_output
 from daddy_core.catalogue import Case
 from daddy_core.dynamics import models
 
@@ -62,16 +63,14 @@ class LongitudeGrid:
         else:
             sol = plan.solution
             t = float(sol.X[0, sol.time_index] + self.units.time(t_s - plan.epoch_s))
-            node_t = sol.X[:, sol.time_index]
-            node_L = sol.t_start + np.concatenate([[0.0], np.cumsum(sol.stage_dt)])
-            reference = float(np.interp(t, node_t, node_L))
+            reference = float(np.interp(t, sol.X[:, sol.time_index],
+                                        trajectory_output.node_longitudes(sol)))
         L = reference + math.remainder(L - reference, 2 * math.pi)
         return np.concatenate([mee, [t, x_cart[6]]]), L
 
     def ends(self, plan: Plan) -> tuple[np.ndarray, np.ndarray]:
         sol = plan.solution
-        lengths = np.asarray(sol.stage_dt, float)
-        return sol.t_start + np.cumsum(lengths), lengths
+        return trajectory_output.node_longitudes(sol)[1:], np.asarray(sol.stage_dt, float)
 
     def problem_grid(self, lengths: np.ndarray, start: float) -> tuple[np.ndarray, float | None]:
         """The lengths are the problem's (angles); it starts at the estimate's longitude."""

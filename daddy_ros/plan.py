@@ -100,14 +100,14 @@ class Plan:
         and thrust bound (normalised). A solution staged in true longitude (Earth-centred)
         gives its stage durations from its time states and its states in Cartesian
         coordinates, as every plan holds them."""
-        if trajectory_output.is_earth_centred(sol):
+        rtn = trajectory_output.is_earth_centred(sol)
+        if rtn:
             dt_s = np.diff(X[:, sol.time_index]) * units.tu_s
             states = trajectory_output.earth_cartesian_si(sol, X)
         else:
             dt_s, states = sol.stage_dt * units.tu_s, units.states_si(X)
         return cls(epoch_s, dt_s, sol.thrust_n.copy(), states, sol, request_id, solve_time_s,
-                   warm_start, sol.max_violation, float(units.thrust_n(thrust_bound)),
-                   trajectory_output.is_earth_centred(sol))
+                   warm_start, sol.max_violation, float(units.thrust_n(thrust_bound)), rtn)
 
     @property
     def stage_start_s(self) -> np.ndarray:

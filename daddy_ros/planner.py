@@ -129,8 +129,7 @@ class GuidancePlanner:
         x0 = self.checks.check_state(pos_m, vel_m_s, mass_kg, stamp_s, now_s)
         shifted = self.shift(None if cold else self.plan, stamp_s, x0)
         warm = shifted.start is not None
-        start = shifted.start or WarmStart(
-            np.full((shifted.problem.N, 3), float(self.units.thrust(1e-6))))
+        start = shifted.start or WarmStart(self.case.cold_guess(shifted.problem.N))
         opts = self.policy.options(warm, arrival=shifted.problem.N <= MIN_STAGES_LEFT)
         # the current plan may already fly above the derating: start from the lowest rating it
         # keeps to instead of failing on the bounds below first

@@ -105,5 +105,5 @@ class TruthSim:
         if self.case.staged_in_angle:
             raise DaddyError(f"TruthSim.miss: {self.case.name!r} arrives on an orbit, not at a "
                              "state; compare its elements (models.cartesian_to_mee)")
-        d = self.units.states_si(self.x - self.case.x_target)
+        d = self.units.cartesian_si(self.x - self.case.x_target)
         return float(np.linalg.norm(d[:3])), float(np.linalg.norm(d[3:6]))

@@ -131,6 +131,15 @@ class Case:
         return models.earth_cartesian(self.units.gm, self.spacecraft.exhaust_speed(self.units),
                                       *self._j2())
 
+    def cold_guess(self, stages: int) -> np.ndarray:
+        """(stages, 3) initial controls of a cold solve: the case's ``solver.u_guess_n`` (the
+        paper's 1e-6 N by default) on every component, normalised for a spacecraft (as it is
+        for the double integrator's accelerations)."""
+        guess = self.solver.get("u_guess_n", 1e-6)
+        if self.spacecraft is not None:
+            guess = float(self.units.thrust(guess))
+        return np.full((int(stages), 3), guess)
+
     def cartesian_x0(self) -> np.ndarray:
         """The initial state as ``cartesian_rhs`` takes it, [r, v, m] (7,) normalised."""
         if not self.staged_in_angle:

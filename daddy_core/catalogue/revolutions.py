@@ -67,9 +67,8 @@ def search_revolutions(case: Case, fuel_optimal: bool = False, span: float = 2.0
                        progress: Callable[[str], None] | None = None) -> RevolutionSearch:
     """The module docstring's search around ``case.revolutions`` (span and tol in
     revolutions; the case's own solve comes first, from its cold guess)."""
-    solved: dict[float, Solution | None] = {}
+    solved: dict[float, Solution | None] = {}   # None: infeasible
     trials: list[RevolutionTrial] = []
-    warm: list[tuple[float, np.ndarray]] = []   # (revolutions, controls) of converged solves
 
     def mass(revs: float) -> float:
         if revs in solved:
@@ -77,12 +76,11 @@ def search_revolutions(case: Case, fuel_optimal: bool = False, span: float = 2.0
             return sol.final_mass_kg if sol is not None else -math.inf
         variant = case.with_revolutions(revs)
         problem = problem_from_case(variant)
-        if warm:
-            near = min(warm, key=lambda w: abs(w[0] - revs))[1]
-            u0 = resample(near, problem.N)
+        feasible = [r for r, s in solved.items() if s is not None]
+        if feasible:
+            u0 = resample(solved[min(feasible, key=lambda r: abs(r - revs))].U, problem.N)
         else:
-            u0 = np.full((problem.N, problem.nu),
-                         float(case.units.thrust(case.solver.get("u_guess_n", 1e-6))))
+            u0 = case.cold_guess(problem.N)
         opts = case_options(case, fuel_optimal)
         t = time.process_time()
         sol = solve(problem, u0, method=method, fuel_optimal=fuel_optimal, options=opts,
@@ -91,8 +89,6 @@ def search_revolutions(case: Case, fuel_optimal: bool = False, span: float = 2.0
         solved[revs] = sol if ok else None
         trials.append(RevolutionTrial(revs, problem.N, sol.final_mass_kg if ok else None,
                                       sol.converged, time.process_time() - t))
-        if ok:
-            warm.append((revs, sol.U))
         if progress is not None:
             state = ("" if sol.converged else f" (not converged: {sol.reason})") if ok \
                 else f"infeasible ({sol.reason})"

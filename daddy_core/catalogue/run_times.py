@@ -10,13 +10,19 @@ from pathlib import Path
 RUN_TIMES_FILE = Path(__file__).with_name("run_times.json")
 
 
-def expected_run_time(case_name: str) -> str:
-    """'energy 45 s, fuel 7.1 s' for a measured case ('fuel: not converged in 600 s' where a
-    solve did not converge within the cap); '' when the case was not measured."""
+def read_run_times() -> dict:
+    """The measurements ({"cases": {name: {"energy": ..., "fuel": ...}}, "machine", "date"}),
+    or {} without a readable file."""
     try:
-        measured = json.loads(RUN_TIMES_FILE.read_text())["cases"].get(case_name, {})
-    except (OSError, ValueError, KeyError):
-        return ""
+        return json.loads(RUN_TIMES_FILE.read_text())
+    except (OSError, ValueError):
+        return {}
+
+
+def expected_run_time(run_times: dict, case_name: str) -> str:
+    """'energy 45 s, fuel 7.1 s' for a case measured in ``run_times`` ('fuel: not converged in
+    600 s' where a solve did not converge within the cap); '' when it was not measured."""
+    measured = run_times.get("cases", {}).get(case_name, {})
     parts = []
     for kind in ("energy", "fuel"):
         r = measured.get(kind)
@@ -29,10 +35,8 @@ def expected_run_time(case_name: str) -> str:
     return ", ".join(parts)
 
 
-def measured_on() -> str:
-    """'on <machine>, <date>' of the measurements ('' without them)."""
-    try:
-        d = json.loads(RUN_TIMES_FILE.read_text())
-        return f"measured on {d['machine']}, {d['date']}, CPU per solve"
-    except (OSError, ValueError, KeyError):
+def measured_on(run_times: dict) -> str:
+    """'measured on <machine>, <date>, ...' of ``run_times`` ('' without them)."""
+    if "machine" not in run_times or "date" not in run_times:
         return ""
+    return f"measured on {run_times['machine']}, {run_times['date']}, CPU per solve"
