@@ -22,12 +22,25 @@ from daddy_core.dynamics import models
 from .plan import Plan
 
 
+# Positions on a grid this close are the same: an estimate this close to a boundary (a stage
+# start, the arrival phase's limits) is on it; the boundaries are sums of stage lengths, equal
+# only to round-off
+TIME_EPS_S = 1e-3
+ANGLE_EPS_RAD = 1e-9
+
+
 class CartesianGrid:
     """Stages of time: the grid variable is the time on the caller's clock [s]; the state is
     the estimate's (normalised)."""
 
+    eps = TIME_EPS_S
+
     def __init__(self, case: Case):
         self.units = case.units
+
+    def nominal_stage_length(self, stage_dt: np.ndarray) -> float:
+        """A problem's mean stage length (normalised durations) in the grid's variable [s]."""
+        return float(self.units.time_s(np.mean(stage_dt)))
 
     def state(self, x_cart: np.ndarray, t_s: float, plan: Plan | None) -> tuple[np.ndarray, float]:
         """The problem's initial state (normalised) and the grid position of an estimate x_cart
@@ -49,8 +62,14 @@ class LongitudeGrid:
     longitude [rad], unwrapped along the plan (a plan's stages span hundreds of revolutions);
     the state is [p, f, g, h, k, t, m] with t the time since the plan's departure."""
 
+    eps = ANGLE_EPS_RAD
+
     def __init__(self, case: Case):
         self.case, self.units = case, case.units
+
+    def nominal_stage_length(self, stage_dt: np.ndarray) -> float:
+        """A problem's mean stage length [rad] (its stages are angles already)."""
+        return float(np.mean(stage_dt))
 
     def state(self, x_cart: np.ndarray, t_s: float, plan: Plan | None) -> tuple[np.ndarray, float]:
         """The elements, time and mass (normalised) of an estimate x_cart = [r, v, m]

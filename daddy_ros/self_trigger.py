@@ -10,6 +10,10 @@ A re-plan is due at an estimate (parameters: ``config.TriggerConfig``) when
   ``arrival_min_step`` of a stage remains: every estimate there re-plans, so the last
   open-loop interval -- where execution errors can no longer be corrected -- is as short as the
   estimates come;
+
+the nominal grid is the scenario's own (``frames.grid_of``): equal stages of time, or of true
+longitude for the Earth-centred scenarios, whose stages last longer as the orbit rises (and
+vary around an eccentric orbit), so an estimate's place on them is its unwrapped longitude;
 - ``DRIFT``: it has drifted from the prediction of the schedule in force by more than
   ``trigger_position_m`` or ``trigger_velocity_m_s``. The prediction is reset to the estimate
   each re-plan starts from, then propagated with the plan's thrust (the dynamics without
@@ -30,11 +34,9 @@ from daddy_core.catalogue import Case
 from daddy_core.integrators import rk78
 
 from .config import TriggerConfig
+from .frames import TIME_EPS_S, CartesianGrid, LongitudeGrid
 from .plan import Plan
 
-# an estimate this close to a boundary (a stage start, the arrival phase's limits) is on it:
-# the times come from sums of stage durations, equal only to round-off
-TIME_EPS_S = 1e-3
 
 
 class Reason(str, enum.Enum):
@@ -59,17 +61,20 @@ class ReplanTrigger:
     Args:
         case: the scenario (its dynamics and units).
         settings: the policy's parameters.
-        stage_s: the nominal stage length [s] (the transfer's N stages of equal length).
+        grid: where an estimate lies on the scenario's stages (time [s] or true longitude [rad]).
+        stage_length: the nominal stage length in the grid's variable (the transfer's N stages
+            of equal length).
         stages: N.
     """
 
-    def __init__(self, case: Case, settings: TriggerConfig, stage_s: float, stages: int):
-        self.case, self.settings = case, settings
-        self.stage_s, self.stages = stage_s, stages
+    def __init__(self, case: Case, settings: TriggerConfig, grid: CartesianGrid | LongitudeGrid,
+                 stage_length: float, stages: int):
+        self.case, self.settings, self.grid = case, settings, grid
+        self.stage_length, self.stages = stage_length, stages
         self._lock = threading.Lock()
         self._x = None        # predicted normalised state at time self._t
         self._t = None
-        self._last = None     # time of the last estimate observed
+        self._last = None     # grid position of the last estimate observed
 
     @classmethod
     def for_planner(cls, planner, settings: TriggerConfig) -> "ReplanTrigger | None":
@@ -80,10 +85,8 @@ class ReplanTrigger:
         if not settings.self_replan:
             return None
         base = planner.base_problem
-        # the nominal grid in time: equal stages (of true longitude, for Earth-centred
-        # scenarios: then their mean duration)
-        return cls(planner.case, settings, float(planner.units.time_s(planner.case.tof / base.N)),
-                   base.N)
+        return cls(planner.case, settings, planner.grid,
+                   planner.grid.nominal_stage_length(base.stage_dt), base.N)
 
     def observe(self, t_s: float, pos_m, vel_m_s, mass_kg: float,
                 plan: Plan | None) -> Reason | None:
@@ -93,21 +96,24 @@ class ReplanTrigger:
         with self._lock:
             if self._t is not None and t_s < self._t - TIME_EPS_S:
                 return None
-            last, self._last = self._last, t_s
+            x = self.case.units.cartesian_normalised(np.concatenate([pos_m, vel_m_s, [mass_kg]]))
+            here = self.grid.state(x, t_s, plan)[1]
+            last, self._last = self._last, here
             if plan is None:
                 return None
             if self._x is None:
                 self._reset(t_s, pos_m, vel_m_s, mass_kg)
                 return None
             self._advance(t_s, plan)
-            end = plan.end_s
+            end = float(self.grid.ends(plan)[0][-1])
             s = self.settings
-            remaining = end - t_s
-            if (s.arrival_stages and remaining <= s.arrival_stages * self.stage_s + TIME_EPS_S
-                    and remaining > s.arrival_min_step * self.stage_s + TIME_EPS_S):
+            remaining = (end - here) / self.stage_length      # in nominal stages
+            eps = self.grid.eps / self.stage_length
+            if (s.arrival_stages and remaining <= s.arrival_stages + eps
+                    and remaining > s.arrival_min_step + eps):
                 return Reason.ARRIVAL
             if (s.replan_every_stages and last is not None
-                    and self._boundary_between(last, t_s, end)):
+                    and self._boundary_between(last, here, end)):
                 return Reason.STAGE
             if self._drifted(pos_m, vel_m_s):
                 return Reason.DRIFT
@@ -135,12 +141,12 @@ class ReplanTrigger:
                 self._x = propagate(self.case, self._x, plan.thrust_at(a), b - a)
         self._t = t_s
 
-    def _boundary_between(self, t_prev: float, t_s: float, end_s: float) -> bool:
+    def _boundary_between(self, prev: float, here: float, end: float) -> bool:
         """A nominal boundary k (k % replan_every_stages == 0, before the arrival phase) in
-        (t_prev, t_s]."""
-        origin = end_s - self.stages * self.stage_s
-        k_hi = int(np.floor((t_s - origin + TIME_EPS_S) / self.stage_s))
-        k_lo = int(np.floor((t_prev - origin + TIME_EPS_S) / self.stage_s))
+        (prev, here] (grid positions; the grid ends at ``end``)."""
+        origin, eps = end - self.stages * self.stage_length, self.grid.eps
+        k_hi = int(np.floor((here - origin + eps) / self.stage_length))
+        k_lo = int(np.floor((prev - origin + eps) / self.stage_length))
         last_k = self.stages - max(self.settings.arrival_stages, 0) - 1
         return any(0 < k <= last_k and k % self.settings.replan_every_stages == 0
                    for k in range(k_lo + 1, k_hi + 1))

@@ -12,7 +12,7 @@ from daddy_ros.config import PLANS_DIR, TriggerConfig
 from daddy_ros.closed_loop import flight_steps
 from daddy_ros.plan import Code
 from daddy_ros.planner import GuidancePlanner
-from daddy_ros.self_trigger import Reason, ReplanTrigger
+from daddy_ros.self_trigger import Reason, ReplanTrigger, propagate
 from daddy_ros.shift import ARRIVAL_SPEED_SCALE_M_S, MIN_STAGE_FRACTION, MIN_STAGES_LEFT
 from daddy_ros.sim import T0_S, Errors, TruthSim
 
@@ -111,7 +111,7 @@ def _trigger(policy=None):
     pl = GuidancePlanner("earth_mars")
     pl.load_plan(PLANS_DIR / "earth_mars_fuel.json", T0_S)
     trig = ReplanTrigger.for_planner(pl, policy or TriggerConfig())
-    return pl, trig, trig.stage_s
+    return pl, trig, trig.stage_length
 
 
 def test_self_trigger_predicts_the_flight_and_flags_drift():
@@ -473,12 +473,40 @@ def test_an_earth_centred_scenario_plans_from_cartesian_estimates(earth_planner)
     assert abs(x[:3] @ x[3:6]) < 1e-6 * np.linalg.norm(x[:3]) * np.linalg.norm(x[3:6])
 
 
+def test_self_trigger_counts_an_earth_plans_stages_in_true_longitude(earth_planner):
+    """Earth-centred stages are equal in true longitude, not in time (a rising orbit's stages
+    last longer): the policy re-plans at the estimates on every replan_every-th stage start of
+    that grid and in the arrival phase's stages, and at no estimate between two starts."""
+    pl = earth_planner
+    plan, N = pl.plan, pl.base_problem.N
+    trig = ReplanTrigger.for_planner(pl, TriggerConfig(
+        replan_every_stages=10, trigger_position_m=0.0, trigger_velocity_m_s=0.0,
+        arrival_stages=2, arrival_min_step=1 / 64))
+    np.testing.assert_allclose(pl.base_problem.stage_dt, trig.stage_length)   # ~36 deg
+    K = len(plan.stage_dt_s)
+    starts = plan.epoch_s + np.concatenate([[0.0], np.cumsum(plan.stage_dt_s)])
+    reasons = {}
+    for j in range(K + 1):                     # the plan's nodes and the midpoints of its stages
+        pos, vel, mass = plan.states_si[j, :3], plan.states_si[j, 3:6], plan.states_si[j, 6]
+        reasons[N - K + j] = trig.observe(starts[j], pos, vel, mass, plan)
+        if j < K:
+            x = pl.units.cartesian_si(propagate(pl.case, pl.units.cartesian_normalised(
+                plan.states_si[j]), plan.thrust_n[j], 0.5 * plan.stage_dt_s[j]))
+            reasons[N - K + j + 0.5] = trig.observe(starts[j] + 0.5 * plan.stage_dt_s[j],
+                                                    x[:3], x[3:6], x[6], plan)
+    stage = [k for k, r in reasons.items() if r is Reason.STAGE]
+    arrival = [k for k, r in reasons.items() if r is Reason.ARRIVAL]
+    first = N - K + 1                          # the first node observed after the prediction starts
+    assert stage == [k for k in range(10, N - 2, 10) if k >= first]
+    assert arrival == [N - 2, N - 1.5, N - 1, N - 0.5]
+    assert all(r is None for k, r in reasons.items() if k not in stage + arrival)
+
+
 def test_an_earth_centred_plan_is_re_planned_warm_from_a_perturbed_estimate(earth_planner):
     """After 5 % of the flight, flown in Cartesian coordinates in time with the plan's thrust
     (``self_trigger.propagate``, the node's own prediction: it meets the plan's next node to
     a few cm), an estimate 1 km and 1 m/s off: the warm re-plan starts at the estimate's true
     longitude mid-stage, keeps the arrival time and reaches the target orbit."""
-    from daddy_ros.self_trigger import propagate
     pl = earth_planner
     plan, case, u = pl.plan, pl.case, pl.units
     k = int(0.05 * len(plan.stage_dt_s))

@@ -215,22 +215,38 @@ def earth_cartesian(gm: float, exhaust_speed: float, j2: float = 0.0, j2_radius:
     """The Earth-centred problem in Cartesian coordinates and in time, rhs(t, x, u): x = [r (3),
     v (3), m] in the inertial frame of the equinoctial elements, u the thrust in RTN (as
     ``equinoctial_sundman`` takes it), J2 as the gradient of the zonal potential, -3/2 J2 gm
-    R^2 / r^5 [x (1 - 5 z^2/r^2), y (1 - 5 z^2/r^2), z (3 - 5 z^2/r^2)]. For floats: what the
-    guidance loop propagates between estimates (the Sundman model's independent variable is
-    the true longitude, an estimate's is the time)."""
+    R^2 / r^5 [x (1 - 5 z^2/r^2), y (1 - 5 z^2/r^2), z (3 - 5 z^2/r^2)]. What the guidance
+    loop propagates between estimates (the Sundman model's independent variable is the true
+    longitude, an estimate's is the time); written by component like the other models, so it
+    also takes arrays and DA."""
     inv_c = -1.0 / exhaust_speed
     j2c = -1.5 * gm * j2 * j2_radius ** 2
 
     def rhs(t, x, u):
-        r, v, m = np.asarray(x[:3], float), np.asarray(x[3:6], float), float(x[6])
-        rn = math.sqrt(r @ r)
-        acc = r * (-gm / rn ** 3) + rtn_basis(r, v) @ np.asarray(u[:3], float) / m
+        # Component by component (no numpy calls on floats: this runs at every step of every
+        # prediction), the RTN axes as rtn_basis builds them: radial r / |r|, normal h / |h|,
+        # transverse (h x r) / (|h| |r|).
+        x0, x1, x2, v0, v1, v2 = x[0], x[1], x[2], x[3], x[4], x[5]
+        rn2 = x0 * x0 + x1 * x1 + x2 * x2
+        inv_r = 1.0 / dm.sqrt(rn2)
+        h0, h1, h2 = x1 * v2 - x2 * v1, x2 * v0 - x0 * v2, x0 * v1 - x1 * v0
+        inv_h = 1.0 / dm.sqrt(h0 * h0 + h1 * h1 + h2 * h2)
+        inv_m = 1.0 / x[6]
+        ur, un = u[0] * inv_r * inv_m, u[2] * inv_h * inv_m
+        ut = u[1] * inv_r * inv_h * inv_m
+        grav = -gm * inv_r * inv_r * inv_r
+        a0 = x0 * (grav + ur) + (h1 * x2 - h2 * x1) * ut + h0 * un
+        a1 = x1 * (grav + ur) + (h2 * x0 - h0 * x2) * ut + h1 * un
+        a2 = x2 * (grav + ur) + (h0 * x1 - h1 * x0) * ut + h2 * un
         if j2c:
-            z2 = (r[2] / rn) ** 2
-            acc = acc + (j2c / rn ** 5) * np.array([r[0] * (1 - 5 * z2), r[1] * (1 - 5 * z2),
-                                                    r[2] * (3 - 5 * z2)])
-        return np.concatenate([v, acc, [float(_magnitude(u)) * inv_c]])
-    return Dynamics(rhs, prepare_control=with_thrust_magnitude)
+            inv_r2 = inv_r * inv_r
+            z2 = x2 * x2 * inv_r2
+            c = j2c * inv_r2 * inv_r2 * inv_r
+            a0 = a0 + c * x0 * (1.0 - 5.0 * z2)
+            a1 = a1 + c * x1 * (1.0 - 5.0 * z2)
+            a2 = a2 + c * x2 * (3.0 - 5.0 * z2)
+        return dm.vector([v0, v1, v2, a0, a1, a2, _magnitude(u) * inv_c])
+    return _indexed(rhs)
 
 
 def keplerian_to_equinoctial(a, e, i_rad, raan_rad, argp_rad, nu_rad):
