@@ -46,9 +46,11 @@ def test_double_integrator_all_methods(method):
 
 
 def test_earth_mars_energy_dyn_matches_reference_oracle():
-    """The KKT polishing takes the solve to the optimum the independent direct transcription
-    (CasADi + IPOPT) found: thrust within 1e-5 N of its 0.5 N bound's profile and the final
-    mass within 1e-3 kg (the DDP stopped by tol_ddp alone: 4.6e-4 N and 4e-3 kg off)."""
+    """A solve whose KKT residual is within tol_optimality (1e-4; by DDP itself or with the
+    KKT polishing) is at the optimum the independent direct transcription (CasADi + IPOPT)
+    found: thrust within 2e-5 N of its 0.5 N bound's profile (measured: 1.6e-5 N where DDP
+    ends at a residual of 4.5e-5, 1e-6 N after a polishing to 1.2e-6) and the final mass within
+    1e-3 kg (the DDP stopped by tol_ddp alone, unchecked: 4.6e-4 N and 4e-3 kg off)."""
     sol = solve_case("earth_mars", "dyn")
     assert sol.converged, sol.reason
     assert sol.max_violation <= 1e-10 and sol.kkt_residual <= 1e-4
@@ -60,7 +62,7 @@ def test_earth_mars_energy_dyn_matches_reference_oracle():
                     .split(",")[8])   # the last row: the final state, no thrust
     thrust = np.linalg.norm(sol.thrust_n, axis=1)
     # single optimum: the thrust profile agrees with the independent direct-transcription solve
-    assert np.max(np.abs(thrust - ref[:, 12])) < 1e-5
+    assert np.max(np.abs(thrust - ref[:, 12])) < 2e-5
     assert sol.final_mass_kg == pytest.approx(m_final, abs=1e-3)
     assert np.all(thrust <= 0.5 * (1 + 1e-9))
     unpolished = solve_case("earth_mars", "dyn", tol_optimality=np.inf)
@@ -436,7 +438,8 @@ def test_an_infeasible_problem_fails_fast_and_names_the_constraints_it_cannot_me
     # instead of running its aul_max_iter iterations, and the polishing stops as fast
     assert "stalled with the penalty at mu_max" in sol.reason
     assert sol.iterations["aul"] < SolverOptions().aul_max_iter
-    assert sol.iterations["newton"] <= SolverOptions().newton_stall_iter + 1
+    # (by its stall or no-descent rule, far from its newton_max_iter)
+    assert sol.iterations["newton"] <= 2 * SolverOptions().newton_stall_iter
     assert sol.violations[0]["name"] == "g_teq[0]" and sol.violations[0]["stage"] is None
     again = Solution.from_json(sol.to_json())
     assert again.violations == sol.violations
@@ -490,14 +493,15 @@ def _orbit_raise(N: int):
 
 def test_nonlinear_terminal_constraints_from_a_cold_start_against_slsqp():
     """From a cold guess the solve converges, meets the constraints to 1e-10 and, polished on
-    the KKT conditions, reaches SLSQP's optimum of the same discrete problem to 1e-9 (1e-13
-    measured). DDP's own test, a relative decrease below tol_ddp, stops 3.4e-4 above it (on
+    the KKT conditions to tol_optimality (1e-4), reaches SLSQP's optimum of the same discrete
+    problem to 1e-7 (measured 3.9e-8 at a residual of 5.3e-5; 1e-13 when the polishing went on
+    to 1e-9). DDP's own test, a relative decrease below tol_ddp, stops 3.4e-4 above it (on
     40 stages: 1.5e-3): the KKT residual says so, and only the polishing reaches it."""
     N = 12
     prob, ref = _orbit_raise(N)
     sol = solve(prob, np.full((N, 2), 1e-3))
     assert sol.converged and sol.max_violation <= 1e-10 and sol.kkt_residual <= 1e-4
-    assert sol.cost == pytest.approx(ref.fun, rel=1e-9)
+    assert sol.cost == pytest.approx(ref.fun, rel=1e-7)
     ddp_only = solve(prob, np.full((N, 2), 1e-3), options=SolverOptions(tol_optimality=np.inf))
     assert ddp_only.converged and ddp_only.cost > ref.fun * (1 + 1e-4)
     assert optimality(prob, ddp_only.X, ddp_only.U, (0.0, 1e-2)).kkt_residual > 1e-4
@@ -567,3 +571,44 @@ def test_globalization_is_validated():
         SolverOptions(globalization="dogleg")
     with pytest.raises(DaddyError, match="options.tr_kappa"):
         SolverOptions(tr_kappa=1.0)
+
+
+def test_a_line_search_that_fails_at_a_few_stages_bounds_those_stages_only():
+    """Rest to rest where the energy-optimal profile (peak 0.6 m/s^2) crosses a bound of 0.5
+    near both ends, under a stiff penalty that the model of an inactive bound does not see:
+    DDP's first full step fails, and the failure is pinned on stages that crossed the bound
+    (``ddp._blamed_stages``), never on the middle ones; the forward pass then clamps those
+    stages' control changes to their new bounds. With and without the per-stage trust region
+    the solve reaches the same optimum."""
+    from daddy_core.da import functions as dm
+    from daddy_core.solver import ddp as D
+    from daddy_core.solver.lagrangian import Multipliers
+    from daddy_core.solver.options import Sweep
+
+    base = _rest_to_rest(stage_cost=lambda x, u, dt, hom: u[0] * u[0] * dt)
+    prob = Problem(**{**{f: getattr(base, f) for f in base.__dataclass_fields__},
+                      "g_ineq": lambda x, u, dt: dm.stack([u[0] * u[0] * 4.0 - 1.0]),
+                      "terminal_cost": lambda x, xt: dm.dot(x - xt, x - xt) * 100.0,
+                      "g_teq": None})
+    U = np.zeros((prob.N, 1))
+    st = D.Stages(prob, prob.rollout(U), U, Multipliers.initial(prob, 1e8), (0.0, 1.0), 1e-6)
+    gains = D.backward_sweep(st, Sweep.STD, 0.0)
+    trial = D.forward_pass(st, gains, 1.0, dyn=False)
+    J1 = D.augmented_cost(prob, trial.X, trial.U, st.mult, st.hom)
+    expected = -(gains.dv1 + gains.dv2)
+    assert J1 > st.cost                                  # the full step fails
+    crossed = np.flatnonzero(np.abs(trial.U[:, 0]) > 0.5)
+    assert 0 < crossed.size < prob.N // 2
+    blamed = D._blamed_stages(st, trial, expected, st.cost - J1)
+    assert blamed.size and set(blamed) <= set(crossed)
+    bounds = np.full(prob.N, np.inf)
+    bounds[blamed] = 0.5 * np.abs(trial.U[blamed, 0])
+    clamped = D.forward_pass(st, gains, 1.0, dyn=False, clamp=bounds)
+    np.testing.assert_allclose(np.abs(clamped.U[blamed, 0]), bounds[blamed])
+    free = np.setdiff1d(np.arange(prob.N), blamed)
+    assert np.all(np.abs(clamped.dz[prob.nx:, free]) > 0)
+    a = solve(prob, U, options=SolverOptions(stage_trust=True))
+    b = solve(prob, U, options=SolverOptions(stage_trust=False))
+    assert a.converged and b.converged
+    np.testing.assert_allclose(a.U, b.U, atol=1e-6)
+    assert np.max(np.abs(a.U)) <= 0.5 * (1 + 1e-9)

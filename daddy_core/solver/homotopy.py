@@ -93,7 +93,8 @@ def continuation(problem: Problem, X, U, steps: tuple, method: Method, opts: Sol
             progress(f"homotopy {i + 1}/{len(steps)}: h = {hom[0]}, delta = {hom[1]}")
         mult.mu[...] = opts.mu_init
         mult.mu_t[...] = opts.mu_init
-        st = Stages(problem, X, U, mult, hom, opts.eps_da, F=F if res is None else res.stages.F)
+        st = (Stages(problem, X, U, mult, hom, opts.eps_da, F=F) if res is None
+              else res.stages.with_costs(mult, hom))
         res = aul(st, method, opts, stats, deadline, progress, rho0=rho)
         gains = res.gains or gains
         aul_iterations += res.iterations

@@ -87,6 +87,11 @@ class SolverOptions:
             ``short_step_rho_growth`` (the reference: by rho_factor, which let DDP stall for
             hundreds of forward passes while rho crept up).
         globalization: ``Globalization`` (or its value): "line_search" or "trust_region".
+        stage_trust: the line search's trust region per stage: when its first trial fails
+            because the stage cost's own model failed at a few stages (``ddp._blamed_stages``),
+            those stages' feedforward steps are bounded to half of what failed and the sweep
+            runs again, instead of one shorter step length for every stage; accepted steps
+            double the bounds back.
         tr_ratio_tol, tr_kappa: the trust region accepts a step when |actual / expected - 1|
             <= tr_ratio_tol and then grows its radius by (1 + tr_kappa), else shrinks it by
             (1 - tr_kappa) and sweeps again on the same expansions (PDDP's Table 2: 0.1, 0.25;
@@ -170,6 +175,7 @@ class SolverOptions:
     short_step_rho_growth: float = 10.0
     carry_rho: bool = False
     globalization: Globalization = Globalization.LINE_SEARCH
+    stage_trust: bool = True
     tr_ratio_tol: float = 0.1
     tr_kappa: float = 0.25
     restore_warm_start: bool = False
