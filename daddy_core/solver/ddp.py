@@ -648,7 +648,8 @@ def ddp(st: Stages, method: Method, opts: SolverOptions, stats: DDPStats,
     the reference code; a first trial that fails at a few stages (``_blamed_stages``) bounds
     those stages' steps and sweeps again instead (``opts.stage_trust``). The trust region
     bounds every stage's step and accepts the full step when the reduction ratio is near 1; a
-    rejected step shrinks the region and sweeps again on the same expansions. rho0: the Quu regularisation to start from (default opts.rho_init);
+    rejected step shrinks the region and sweeps again on the same expansions. rho0: the Quu
+    regularisation to start from (default opts.rho_init);
     radius0: the trust-region radius to start from.
     """
     p = st.problem

@@ -89,9 +89,10 @@ class SolverOptions:
         globalization: ``Globalization`` (or its value): "line_search" or "trust_region".
         stage_trust: the line search's trust region per stage: when its first trial fails
             because the stage cost's own model failed at a few stages (``ddp._blamed_stages``),
-            those stages' feedforward steps are bounded to half of what failed and the sweep
-            runs again, instead of one shorter step length for every stage; accepted steps
-            double the bounds back.
+            those stages' control changes are bounded to half of what failed (the sweep's
+            per-stage radius and the forward pass's clamp) and the sweep runs again, instead
+            of one shorter step length for every stage; an accepted step that a bound held
+            back grows that bound by (1 + tr_kappa).
         tr_ratio_tol, tr_kappa: the trust region accepts a step when |actual / expected - 1|
             <= tr_ratio_tol and then grows its radius by (1 + tr_kappa), else shrinks it by
             (1 - tr_kappa) and sweeps again on the same expansions (PDDP's Table 2: 0.1, 0.25;
