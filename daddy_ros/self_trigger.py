@@ -96,13 +96,13 @@ class ReplanTrigger:
         with self._lock:
             if self._t is not None and t_s < self._t - TIME_EPS_S:
                 return None
-            x = self.case.units.cartesian_normalised(np.concatenate([pos_m, vel_m_s, [mass_kg]]))
+            x = self._normalised(pos_m, vel_m_s, mass_kg)
             here = self.grid.state(x, t_s, plan)[1]
             last, self._last = self._last, here
             if plan is None:
                 return None
             if self._x is None:
-                self._reset(t_s, pos_m, vel_m_s, mass_kg)
+                self._x, self._t = x, t_s
                 return None
             self._advance(t_s, plan)
             end = float(self.grid.ends(plan)[0][-1])
@@ -122,13 +122,13 @@ class ReplanTrigger:
     def replanned(self, t_s: float, pos_m, vel_m_s, mass_kg: float) -> None:
         """A re-plan starts from this estimate: the prediction restarts from it."""
         with self._lock:
-            self._reset(t_s, pos_m, vel_m_s, mass_kg)
+            self._x, self._t = self._normalised(pos_m, vel_m_s, mass_kg), t_s
 
     # ------------------------------------------------------------------ internals
-    def _reset(self, t_s, pos_m, vel_m_s, mass_kg):
-        self._x = self.case.units.cartesian_normalised(np.concatenate([pos_m, vel_m_s,
-                                                                       [mass_kg]]))
-        self._t = t_s
+    def _normalised(self, pos_m, vel_m_s, mass_kg) -> np.ndarray:
+        """An estimate's normalised Cartesian state [r, v, m] (7,)."""
+        return self.case.units.cartesian_normalised(np.concatenate([pos_m, vel_m_s,
+                                                                    [mass_kg]]))
 
     def _advance(self, t_s: float, plan: Plan) -> None:
         """Propagate the prediction to t_s with the plan's thrust, piece by piece between its

@@ -594,12 +594,13 @@ def test_a_line_search_that_fails_at_a_few_stages_bounds_those_stages_only():
     st = D.Stages(prob, prob.rollout(U), U, Multipliers.initial(prob, 1e8), (0.0, 1.0), 1e-6)
     gains = D.backward_sweep(st, Sweep.STD, 0.0)
     trial = D.forward_pass(st, gains, 1.0, dyn=False)
-    J1 = D.augmented_cost(prob, trial.X, trial.U, st.mult, st.hom)
+    stage_costs, terminal = D.augmented_cost_terms(prob, trial.X, trial.U, st.mult, st.hom)
+    J1 = float(np.sum(stage_costs) + terminal)
     expected = -(gains.dv1 + gains.dv2)
     assert J1 > st.cost                                  # the full step fails
     crossed = np.flatnonzero(np.abs(trial.U[:, 0]) > 0.5)
     assert 0 < crossed.size < prob.N // 2
-    blamed = D._blamed_stages(st, trial, expected, st.cost - J1)
+    blamed = D._blamed_stages(st, trial, stage_costs, expected, st.cost - J1)
     assert blamed.size and set(blamed) <= set(crossed)
     bounds = np.full(prob.N, np.inf)
     bounds[blamed] = 0.5 * np.abs(trial.U[blamed, 0])

@@ -19,8 +19,8 @@ import numpy as np
 from .. import da
 from ..errors import DaddyError
 from ..problem import Problem
-from .lagrangian import (Multipliers, augmented_cost, augmented_stage_cost,
-                         augmented_terminal_cost)
+from .lagrangian import (Multipliers, augmented_cost, augmented_cost_terms,
+                         augmented_stage_cost, augmented_terminal_cost)
 from .options import Globalization, Method, SolverOptions, Sweep
 from .results import Status, StepResult
 from .stage_maps import expand_dynamics, maps_at
@@ -490,9 +490,11 @@ def _accepted(expected: float, actual: float, J: float, Jn: float, lo: float, hi
         or (expected <= 1e-15 * max(1.0, abs(J)) and actual >= 0))
 
 
-def _blamed_stages(st: Stages, trial: Trial, expected: float, actual: float) -> np.ndarray:
-    """The stages whose stage-cost model failed on ``trial`` enough to explain why it was
-    rejected, (m,) indices (empty: the failure is not local).
+def _blamed_stages(st: Stages, trial: Trial, stage_costs: np.ndarray, expected: float,
+                   actual: float) -> np.ndarray:
+    """The stages whose stage-cost model failed on ``trial`` (its augmented stage costs
+    ``stage_costs`` (N,)) enough to explain why it was rejected, (m,) indices (empty: the
+    failure is not local).
 
     The quadratic model of stage k's augmented cost, at the trial's actual deviation dz_k,
     predicts l_z dz + dz l_zz dz / 2; where the true change exceeds that by more than a tenth
@@ -509,7 +511,7 @@ def _blamed_stages(st: Stages, trial: Trial, expected: float, actual: float) -> 
     if not (gap > 0 and math.isfinite(gap)):
         return np.empty(0, dtype=int)
     dz = trial.dz.T                                              # (N, n)
-    change = augmented_stage_cost(p, trial.X[:-1].T, trial.U.T, st.mult, st.hom) - st.l
+    change = stage_costs - st.l
     model = (np.einsum("ki,ki->k", st.lz, dz)
              + 0.5 * np.einsum("ki,kij,kj->k", dz, st.lzz, dz))
     err = change - model
@@ -537,12 +539,13 @@ def _line_search(st: Stages, gains: Gains, a0: float, dyn: bool, opts: SolverOpt
         trial = forward_pass(st, gains, a, dyn, clamp)
         if not trial.ok:
             continue
-        Jn = trial.cost = augmented_cost(p, trial.X, trial.U, st.mult, st.hom)
+        stage_costs, terminal = augmented_cost_terms(p, trial.X, trial.U, st.mult, st.hom)
+        Jn = trial.cost = float(np.sum(stage_costs) + terminal)
         expected = -(a * gains.dv1 + a * a * gains.dv2)
         if _accepted(expected, J - Jn, J, Jn, opts.ls_min_ratio, opts.ls_max_ratio):
             return trial
         if i == 0 and opts.stage_trust and math.isfinite(Jn):
-            bad = _blamed_stages(st, trial, expected, J - Jn)
+            bad = _blamed_stages(st, trial, stage_costs, expected, J - Jn)
             if bad.size:
                 return Blame(bad, 0.5 * np.linalg.norm(trial.dz[p.nx:, bad], axis=0))
     return None

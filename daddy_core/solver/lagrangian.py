@@ -90,8 +90,15 @@ def augmented_terminal_cost(problem: Problem, xn, mult: Multipliers):
     return phi if gt is None else phi + penalty(gt, mult.lam_t, mult.mu_t, mult.n_tineq)
 
 
+def augmented_cost_terms(problem: Problem, X, U, mult: Multipliers, hom):
+    """The terms of J~ for a trajectory X (N+1, nx), U (N, nu) in floats: (every stage's l~
+    (N,), phi~)."""
+    return (augmented_stage_cost(problem, X[:-1].T, U.T, mult, hom),
+            augmented_terminal_cost(problem, X[-1], mult))
+
+
 def augmented_cost(problem: Problem, X, U, mult: Multipliers, hom) -> float:
     """Augmented cost J~ of a trajectory X (N+1, nx), U (N, nu) in floats (the forward pass's
     J*)."""
-    return float(np.sum(augmented_stage_cost(problem, X[:-1].T, U.T, mult, hom))
-                 + augmented_terminal_cost(problem, X[-1], mult))
+    stages, terminal = augmented_cost_terms(problem, X, U, mult, hom)
+    return float(np.sum(stages) + terminal)
