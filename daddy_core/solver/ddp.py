@@ -512,12 +512,11 @@ def _blamed_stages(st: Stages, trial: Trial, stage_costs: np.ndarray, expected: 
     the pseudo-Huber cost's kink at zero thrust, whose model holds within ~delta.
 
     Not blamed (the failure is not local, and one shorter step for every stage is the answer):
-    more than a tenth of the stages (a cold CR3BP start crossed the thrust bound at 123 of 300
-    stages; the bounds kept from that blame held 170 stages in the sweeps of 60 iterations at
-    line-search steps of 0.004-0.06, and two-revolution DRO solves took twice as long), or a
-    step whose whole expected decrease is worth less than DDP's stopping test (``tol_ddp``
-    relative to the cost: round-off blamed one stage again and again, its bound halved to
-    4e-8, and the 30 iterations that regrew it kept DDP from stopping)."""
+    more than ``_LOCAL_FRACTION`` of the stages (a cold start that crosses the thrust bound
+    along much of the transfer: bounds kept from such a blame would shape the sweeps of every
+    later iteration), or a step whose whole expected decrease is below ``tol`` (DDP's tol_ddp)
+    relative to the cost (its gap is round-off, and a bound halved on round-off again and
+    again takes as many accepted steps to regrow, keeping DDP from its stopping test)."""
     p = st.problem
     gap = expected - actual
     if not (gap > 0 and math.isfinite(gap)) or expected < tol * abs(st.cost):
