@@ -110,6 +110,8 @@ def shift(p: DA, dv) -> DA:
     T, c = p.T, p.c
     if dv.shape[:1] != (T.n,):
         raise DaddyError(f"shift: displacement must have leading axis n={T.n}, got {dv.shape}")
+    if c.ndim == 3 and dv.ndim == 2 and c.shape[2] == dv.shape[1]:
+        return DA(_shift_stages(c, dv, T), T)
     shape = np.broadcast_shapes(c.shape[1:], dv.shape[1:])
     c = np.broadcast_to(c, (T.size,) + shape)
     d = np.broadcast_to(dv.reshape(dv.shape[:1] + (1,) * (len(shape) - dv.ndim + 1)
@@ -124,6 +126,27 @@ def shift(p: DA, dv) -> DA:
     out[1:n + 1] = c[1:n + 1] + grad.reshape((n,) + shape)
     out[n + 1:] = q
     return DA(out, T)
+
+
+def _shift_stages(c: np.ndarray, dv: np.ndarray, T) -> np.ndarray:
+    """``shift``'s closed form for a batch of maps with one displacement each -- c (M, m, B)
+    the coefficients of m components at B expansion points, dv (n, B) -- without broadcasting
+    dv over the m components (the general path's temporaries are (n(n+1)/2, m, B) each: 70 ms
+    for 4960 stages, where this takes a tenth). The gradient of component x at dv gains
+    c_ab dv_b for variable a and c_ab dv_a for b (2 c_aa dv_a when a = b): one accumulation
+    per degree-2 monomial and variable of its pair."""
+    n = T.n
+    q = c[T.block[2]]                                             # (n(n+1)/2, m, B)
+    out = np.empty_like(c)
+    out[0] = np.einsum("mxb,mb->xb", c, monomial_values(dv, T))
+    grad = out[1:n + 1]
+    grad[...] = c[1:n + 1]
+    tmp = np.empty(c.shape[1:])
+    for k, (a, b) in enumerate(zip(T.triu_i.tolist(), T.triu_j.tolist())):
+        grad[a] += np.multiply(q[k], dv[b], out=tmp)
+        grad[b] += np.multiply(q[k], dv[a], out=tmp)
+    out[n + 1:] = q
+    return out
 
 
 class _Scatter(dict):

@@ -58,6 +58,8 @@ def maps_at(problem: Problem, F: da.DA, dz: np.ndarray, inside: np.ndarray, X: n
     """
     if not np.any(inside):
         return expand_dynamics(problem, X[:problem.N], U, values=values)
+    if np.all(inside):   # (a warm re-plan's usual case: no copies of every map by index)
+        return da.shift(F, dz)
     c = np.empty_like(F.c)
     idx_in, idx_out = np.flatnonzero(inside), np.flatnonzero(~inside)
     c[..., idx_in] = da.shift(F[:, idx_in], dz[:, idx_in]).c
