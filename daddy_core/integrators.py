@@ -422,6 +422,77 @@ def _dop853_step(nx: int):
     return namespace["step"]
 
 
+def dop853_batch(rhs, x: np.ndarray, u: np.ndarray, t0, dt, rtol: float = 1e-12,
+                 atol: float = 1e-12, max_steps: int = 100_000) -> np.ndarray:
+    """``dop853`` for B float states at once, each over its own interval with its own step
+    control: the same scheme, error norm and step control per member (first trial step the
+    whole interval), as numpy operations on (nx, B) arrays. For many independent intervals --
+    e.g. every stage of a trajectory from its own start state -- this costs a few rhs calls on
+    arrays instead of ~13 per interval in Python (4960 LEO stages: milliseconds, not 0.5 s).
+
+    Args:
+        rhs: a ``Dynamics`` or a plain rhs(t, x, u) -> dx/dt (called with (nx, B) arrays).
+        x: (nx, B) initial states; u: (nu, B) controls (prepared here); t0, dt: (B,) or
+            scalars, each member's start time and interval length (dt may be negative).
+        rtol, atol, max_steps: as for ``dop853`` (max_steps per member).
+    Returns:
+        (nx, B) states at t0 + dt.
+    Raises:
+        DaddyError: a member's step fell below round-off (NaN or inf dynamics, a singularity)
+        or max_steps was exceeded.
+    """
+    dyn = as_dynamics(rhs)
+    f = dyn.f
+    x = np.array(x, dtype=float)
+    B = x.shape[1]
+    u = dyn.prepared(np.asarray(u, dtype=float))
+    t0 = np.broadcast_to(np.asarray(t0, dtype=float), (B,))
+    dt = np.broadcast_to(np.asarray(dt, dtype=float), (B,))
+    direction = np.where(dt >= 0, 1.0, -1.0)
+    t = np.zeros(B)
+    h_abs = np.abs(dt).copy()
+    rejected = np.zeros(B, dtype=bool)
+    k0 = np.asarray(f(t0, x, u), dtype=float)
+    if k0.shape != x.shape:
+        raise DaddyError(f"dop853_batch: rhs returned shape {k0.shape} for states {x.shape}")
+    for _ in range(max_steps):
+        active = direction * (t - dt) < 0
+        if not active.any():
+            return x
+        eps = np.abs(np.nextafter(t, direction * np.inf) - t)
+        if np.any(active & (h_abs < 10 * eps)):
+            raise DaddyError("dop853_batch: step size below round-off (NaN or inf dynamics, or "
+                             "a singularity)")
+        t_new = t + h_abs * direction
+        t_new = np.where(direction * (t_new - dt) > 0, dt, t_new)
+        h = np.where(active, t_new - t, 0.0)
+        K = [k0]
+        for i in range(1, _DOP_STAGES):
+            xi = x + h * sum(a * K[j] for j, a in _DOP_ROWS[i])
+            K.append(np.asarray(f(t0 + t + _dop.C[i] * h, xi, u), dtype=float))
+        y = x + h * sum(b * K[j] for j, b in _DOP_WEIGHTS)
+        scale = atol + np.maximum(np.abs(x), np.abs(y)) * rtol
+        e5 = np.sum((sum(e * K[j] for j, e in _DOP_E5) / scale) ** 2, axis=0)
+        e3 = np.sum((sum(e * K[j] for j, e in _DOP_E3) / scale) ** 2, axis=0)
+        with np.errstate(invalid="ignore", divide="ignore"):
+            err = np.where((e5 == 0) & (e3 == 0), 0.0,
+                           np.abs(h) * e5 / np.sqrt((e5 + 0.01 * e3) * x.shape[0]))
+            grow = np.where(err == 0, _DOP_MAX_FACTOR,
+                            np.minimum(_DOP_MAX_FACTOR, _DOP_SAFETY * err ** _DOP_EXPONENT))
+            shrink = np.where(np.isnan(err), _DOP_MIN_FACTOR,
+                              np.maximum(_DOP_MIN_FACTOR, _DOP_SAFETY * err ** _DOP_EXPONENT))
+        accept = active & (err < 1)
+        if accept.any():
+            fn = np.asarray(f(t0 + t + h, y, u), dtype=float)   # (FSAL: the next k0)
+            x = np.where(accept, y, x)
+            k0 = np.where(accept, fn, k0)
+            t = np.where(accept, t_new, t)
+        h_abs = np.where(accept, h_abs * np.where(rejected, np.minimum(1.0, grow), grow),
+                         np.where(active, h_abs * shrink, h_abs))
+        rejected = np.where(accept, False, rejected | active)
+    raise DaddyError(f"dop853_batch exceeded max_steps={max_steps}")
+
+
 def dop853(rhs, x, u, t0, dt, rtol: float = 1e-12, atol: float = 1e-12, first_step=None,
            max_steps: int = 100_000, stats: dict | None = None) -> np.ndarray:
     """Integrate one float state with Dormand-Prince 8(5,3) (Hairer's DOP853): the scheme, error

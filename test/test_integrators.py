@@ -8,7 +8,7 @@ from daddy_core import da
 from daddy_core.dynamics import Dynamics, models
 from daddy_core.dynamics.units import Spacecraft, earth_units
 from daddy_core.errors import DaddyError
-from daddy_core.integrators import dop853, rk4, rk78
+from daddy_core.integrators import dop853, dop853_batch, rk4, rk78
 from daddy_core.catalogue import load_case
 
 
@@ -287,6 +287,26 @@ def test_dop853_takes_scipys_steps(name, sign):
     np.testing.assert_array_equal(again, x)
 
 
+@pytest.mark.parametrize("name", ["earth_mars", "halo_l2_l1", "leo_leo"])
+def test_dop853_batch_takes_each_members_own_steps(name):
+    """Each member of a batch integrates its own interval (forwards, backwards, one step or
+    many, through rejected whole-interval trials) with the single-state scheme's steps: the
+    same states to round-off."""
+    case = load_case(name)
+    rhs = case.rhs()
+    rng = np.random.default_rng(7)
+    B = 9
+    u = rng.uniform(-0.6, 0.6, size=(3, B)) * (0.5 / case.units.thrust_unit_n)
+    x = case.x0[:, None] * (1.0 + 1e-3 * rng.normal(size=(case.x0.size, B)))
+    t0 = rng.uniform(0.0, 1.0, size=B)
+    dt = case.tof * np.array([0.001, 0.01, 0.1, 0.25, -0.001, -0.05, -0.2, 0.0, 0.05])
+    with np.errstate(invalid="ignore"):   # LEO: whole-interval trials meet NaN, rejected
+        got = dop853_batch(rhs, x, u, t0, dt)
+        ref = np.stack([dop853(rhs, x[:, j], u[:, j], t0[j], dt[j]) for j in range(B)], axis=1)
+    assert np.max(np.abs(got - ref) / np.maximum(1.0, np.abs(ref))) < 1e-14
+    np.testing.assert_array_equal(got[:, 7], x[:, 7])    # a zero-length interval: no step
+
+
 def test_dop853_errors():
     with pytest.raises(DaddyError, match=r"round-off at t = 0\.(29999|3)"):   # NaN from t = 0.3 on
         dop853(lambda t, x, u: np.array([0.0, 1.0, np.nan if t > 0.3 else 0.0]), np.ones(3),
@@ -295,6 +315,12 @@ def test_dop853_errors():
         dop853(lambda t, x, u: np.ones(4), np.ones(3), np.zeros(1), 0.0, 1.0)
     with pytest.raises(DaddyError, match="max_steps=3"):
         dop853(lambda t, x, u: x, np.ones(1), np.zeros(1), 0.0, 50.0, max_steps=3)
+    with pytest.raises(DaddyError, match="round-off"):                # one member's NaN
+        dop853_batch(lambda t, x, u: np.where(t > 0.3, np.nan, 0.0) * np.ones_like(x),
+                     np.ones((3, 2)), np.zeros((1, 2)), 0.0, np.array([0.2, 1.0]))
+    with pytest.raises(DaddyError, match="max_steps=3"):
+        dop853_batch(lambda t, x, u: x, np.ones((1, 2)), np.zeros((1, 2)), 0.0, 50.0,
+                     max_steps=3)
 
 
 @pytest.mark.parametrize("derivative_tol", [None, 1e-8])

@@ -382,7 +382,7 @@ def test_a_plan_that_fails_its_repropagation_is_never_adopted(monkeypatch):
     solve_mod = sys.modules["daddy_core.solver.solve"]   # (the package exports solve(), too)
     pl = GuidancePlanner("earth_mars")
     plan = pl.load_plan(PLANS_DIR / "earth_mars_fuel.json", T0_S)
-    monkeypatch.setattr(solve_mod, "repropagation_miss", lambda problem, U: np.inf)
+    monkeypatch.setattr(solve_mod, "repropagation_miss", lambda problem, U, *rest: np.inf)
     k = 5
     t = plan.epoch_s + np.sum(plan.stage_dt_s[:k])
     s = plan.states_si[k]

@@ -39,8 +39,10 @@ class Solution:
             converge also names the largest in ``reason``.
         final_mass_kg, propellant_kg: mass figures (None without a mass state).
         repropagation_miss: terminal miss after re-propagating U from x0 with DOP853 at
-            rtol = atol = 1e-12 (normalised, over the terminal-constraint components); inf
-            when the re-propagation failed (JSON: the string "inf").
+            rtol = atol = 1e-12 (normalised, over the terminal-constraint components; while
+            the solved states stay within 1e-7 of the flow, every stage integrated from its own
+            start and the defects carried through the stage maps, equal to round-off:
+            ``solve.repropagation_miss``); inf when the re-propagation failed (JSON: "inf").
         iterations: {homotopy, aul, ddp, newton}; runtime_s: {total, ddp, newton, ...}.
         history: per-homotopy-step summaries; units: {lu_km, tu_s, mu_kg, thrust_unit_n}.
         stage_maps: the last stage maps (``StageMaps``), in memory only (not in JSON/NPZ): a

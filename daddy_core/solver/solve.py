@@ -13,7 +13,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from ..errors import DaddyError
-from ..integrators import dop853
+from ..integrators import dop853, dop853_batch
 from ..problem import Problem
 from . import newton
 from .ddp import DDPStats
@@ -32,27 +32,70 @@ def _describe(r: dict) -> str:
     return f"{r['name']}{label} {r['violation']:.2e}{stage}"
 
 
-def repropagation_miss(problem: Problem, U: np.ndarray) -> float | None:
+def repropagation_miss(problem: Problem, U: np.ndarray, X: np.ndarray | None = None,
+                       maps: StageMaps | None = None) -> float | None:
     """Terminal miss (max terminal-constraint violation) after re-propagating U from x0 with
     DOP853 at rtol = atol = 1e-12, stage by stage (``integrators.dop853``: solve_ivp's scheme and
     step control); inf when the re-propagation fails (NaN or inf dynamics).
 
     Each stage's first trial step is the whole stage (scipy's initial-step heuristic costs two
     rhs calls and usually picks a shorter step); the error control still accepts only steps
-    within the tolerances."""
+    within the tolerances.
+
+    With the trajectory X (N+1, nx) that U was solved on and its stage maps (``StageMaps`` near
+    (X, U)), every stage is re-propagated at once from its own start X_k (``dop853_batch``, the
+    same steps as one at a time) and the stage defects d_k = DOP853(X_k, U_k) - X_{k+1} are
+    carried to the end through the maps' state Jacobians: x_N = X_N + e_N, e_{k+1} = Phi_k e_k
+    + d_k, e_0 = x0 - X_0 -- the sequential re-propagation to first order in e, whose neglected
+    second-order terms are below round-off while every |e_k| <= ``_LINEAR_REPROPAGATION`` (else
+    the stages are integrated one after the other from x0). A converged many-revolution
+    solution is re-propagated in milliseconds instead of ~13 Python rhs calls per stage (4960
+    LEO stages: 0.5 s of a warm re-plan)."""
     if problem.rhs is None:
         x = problem.rollout(U)[-1]
     else:
-        x = problem.x0.copy()
-        try:
-            for k in range(problem.N):
-                x = dop853(problem.rhs, x, U[k], problem.stage_t0[k], problem.stage_dt[k], rtol=1e-12,
-                           atol=1e-12)
-        except DaddyError:
-            return math.inf
+        x = _linear_repropagation(problem, U, X, maps)
+        if x is None:
+            x = problem.x0.copy()
+            try:
+                for k in range(problem.N):
+                    x = dop853(problem.rhs, x, U[k], problem.stage_t0[k], problem.stage_dt[k],
+                               rtol=1e-12, atol=1e-12)
+            except DaddyError:
+                return math.inf
     if problem.terminal_constraints(x)[0] is None:
         return None
     return problem.terminal_violation(x)
+
+
+# the largest deviation e_k from the solved states that the linearised re-propagation carries
+# (its second-order remainder ~ |f_xx| e^2 stays below round-off of the states)
+_LINEAR_REPROPAGATION = 1e-7
+
+
+def _linear_repropagation(problem: Problem, U: np.ndarray, X: np.ndarray | None,
+                          maps: StageMaps | None) -> np.ndarray | None:
+    """x_N of ``repropagation_miss``'s linearised re-propagation, or None when it does not
+    apply (no states or maps, a failed stage, or a deviation beyond _LINEAR_REPROPAGATION)."""
+    if X is None or maps is None or maps.N != problem.N:
+        return None
+    nx = problem.nx
+    try:
+        flows = dop853_batch(problem.rhs, X[:-1].T, U.T, problem.stage_t0, problem.stage_dt,
+                             rtol=1e-12, atol=1e-12)
+    except DaddyError:
+        return None
+    defects = flows.T - X[1:]                                                # (N, nx)
+    # Phi_k[i, j] = d x_{k+1, i} / d x_{k, j}: the maps' linear coefficients (M, nx, N) of the
+    # state variables
+    phi = np.ascontiguousarray(np.transpose(maps.F.c[1:nx + 1], (2, 1, 0)))  # (N, nx, nx)
+    E = np.empty((problem.N + 1, nx))
+    E[0] = problem.x0 - X[0]
+    for k in range(problem.N):
+        np.add(phi[k] @ E[k], defects[k], out=E[k + 1])
+    if not np.max(np.abs(E)) <= _LINEAR_REPROPAGATION:   # (or NaN)
+        return None
+    return X[-1] + E[-1]
 
 
 @dataclass
@@ -253,7 +296,7 @@ def _assemble(problem: Problem, end: _End, hres: HomotopyResult, steps: tuple, m
     units, m_idx = problem.units, problem.mass_index
     N, nu, nx = problem.N, problem.nu, problem.nx
     t0 = time.perf_counter()
-    miss = repropagation_miss(problem, U)
+    miss = repropagation_miss(problem, U, X, end.maps)
     clock.lap("repropagation", t0)
     if miss is not None and not math.isfinite(miss):
         converged, reason = False, "the DOP853 re-propagation of the final controls failed"
