@@ -46,7 +46,8 @@ def test_composition_associative_and_shift(k):
     np.testing.assert_allclose(da.compose(f, ident + s).cons, da.evaluate(f, s), rtol=1e-13)
 
 
-@pytest.mark.parametrize("shape, dv_shape", [((7, 12), (5, 12)), ((7, 12), (5, 1, 12)),
+@pytest.mark.parametrize("shape, dv_shape", [((7, 12), (5, 12)), ((7, 70), (5, 70)),
+                                             ((7, 12), (5, 1, 12)),
                                              ((3,), (5,)), ((4,), (5, 4)), ((), (5,))])
 def test_order2_shift_equals_composition(shape, dv_shape):
     # the closed-form order-2 re-centring is the general composition with dv + identity

@@ -128,24 +128,35 @@ def shift(p: DA, dv) -> DA:
     return DA(out, T)
 
 
+# batch size from which ``_shift_stages`` accumulates the gradient one monomial at a time
+# (a fixed ~0.25 ms of Python for 110 accumulations, then the least memory traffic: B = 110
+# 0.38 ms against 0.69 ms with the scatter products, B = 4960 13 ms against 30; B = 10 0.28
+# against 0.06 ms)
+_SHIFT_LOOP_MIN_BATCH = 64
+
+
 def _shift_stages(c: np.ndarray, dv: np.ndarray, T) -> np.ndarray:
     """``shift``'s closed form for a batch of maps with one displacement each -- c (M, m, B)
     the coefficients of m components at B expansion points, dv (n, B) -- without broadcasting
-    dv over the m components (the general path's temporaries are (n(n+1)/2, m, B) each: 70 ms
-    for 4960 stages, where this takes a tenth). The gradient of component x at dv gains
-    c_ab dv_b for variable a and c_ab dv_a for b (2 c_aa dv_a when a = b): one accumulation
-    per degree-2 monomial and variable of its pair."""
-    n = T.n
+    dv over the m components first (the general path evaluates the value at an (n, m, B)
+    displacement: 70 ms for 4960 stages, where this takes 13). The gradient of component x at
+    dv gains c_ab dv_b for variable a and c_ab dv_a for b (2 c_aa dv_a when a = b)."""
+    n, m, B = T.n, c.shape[1], c.shape[2]
     q = c[T.block[2]]                                             # (n(n+1)/2, m, B)
     out = np.empty_like(c)
     out[0] = np.einsum("mxb,mb->xb", c, monomial_values(dv, T))
+    out[n + 1:] = q
     grad = out[1:n + 1]
-    grad[...] = c[1:n + 1]
-    tmp = np.empty(c.shape[1:])
+    if B < _SHIFT_LOOP_MIN_BATCH:   # two scatter products over (n(n+1)/2, m B) temporaries
+        lin = (q * dv[T.triu_j][:, None, :]).reshape(len(q), -1)
+        lin2 = (q * dv[T.triu_i][:, None, :]).reshape(len(q), -1)
+        grad[...] = c[1:n + 1] + (_SCATTER_I[n] @ lin + _SCATTER_J[n] @ lin2).reshape(n, m, B)
+        return out
+    grad[...] = c[1:n + 1]          # one accumulation per monomial and variable of its pair
+    tmp = np.empty((m, B))
     for k, (a, b) in enumerate(zip(T.triu_i.tolist(), T.triu_j.tolist())):
         grad[a] += np.multiply(q[k], dv[b], out=tmp)
         grad[b] += np.multiply(q[k], dv[a], out=tmp)
-    out[n + 1:] = q
     return out
 
 
