@@ -9,6 +9,8 @@ import argparse
 import sys
 from datetime import datetime, timezone
 
+import numpy as np
+
 from . import trajectory_output
 from .errors import DaddyError
 from .catalogue import list_cases, load_case, problem_from_case
@@ -106,6 +108,8 @@ def main(argv=None) -> int:
     except DaddyError as exc:
         print(f"daddy: error: {exc}", file=sys.stderr)
         return 2
+    if trajectory_output.is_earth_centred(sol) and np.all(np.isfinite(sol.X)):
+        sol.cartesian_miss = trajectory_output.cartesian_miss(sol, case.cartesian_rhs())
     _report(sol)
     if args.json:
         sol.to_json(args.json)
@@ -156,6 +160,11 @@ def _report(sol: Solution) -> None:
           f"re-propagation miss {sol.repropagation_miss if sol.repropagation_miss is None else f'{sol.repropagation_miss:.2e}'}")
     if sol.final_mass_kg is not None:
         print(f"  final mass {sol.final_mass_kg:.3f} kg  propellant {sol.propellant_kg:.3f} kg")
+    if sol.cartesian_miss is not None:
+        m = sol.cartesian_miss
+        print(f"  flown in Cartesian coordinates in time (DOP853), the arrival misses the final "
+              f"node by {m['position_km']:.3e} km, {m['velocity_m_s']:.3e} m/s, "
+              f"{m['mass_kg']:.1e} kg")
     print(f"  iterations: homotopy {it['homotopy']}, AUL {it['aul']}, DDP {it['ddp']}, "
           f"Newton {it['newton']}, KKT {it.get('kkt', 0)}; "
           f"polynomial share {sol.polynomial_share:.0%}")

@@ -55,6 +55,41 @@ def earth_cartesian_si(sol, X: np.ndarray | None = None) -> np.ndarray:
                             units.mass_kg(X[:, 6])])
 
 
+def cartesian_repropagation(sol, rhs) -> np.ndarray:
+    """(N+1, 7) an Earth-centred solution's thrust (RTN, constant over each stage's time) flown
+    in Cartesian coordinates in time from its first node -- DOP853 at rtol = atol = 1e-12
+    (``integrators.dop853``), stage by stage over the node times -- in ``X_si``'s units: what
+    the spacecraft flies if the schedule is executed by the clock. rhs: the normalised
+    Cartesian dynamics with thrust in RTN (``Case.cartesian_rhs``: the model of the elements'
+    own physics, J2 included where the case has it)."""
+    from .integrators import dop853   # (the integrators import nothing of this module)
+    if not is_earth_centred(sol):
+        raise DaddyError("cartesian_repropagation: not an Earth-centred solution")
+    units = Units.from_dict(sol.units)
+    T = sol.X[:, sol.time_index]
+    x = np.append(models.mee_to_cartesian(sol.X[0, :5], sol.t_start, units.gm), sol.X[0, 6])
+    out = np.empty((sol.N + 1, 7))
+    out[0] = x
+    for k in range(sol.N):
+        x = dop853(rhs, x, sol.U[k], T[k], T[k + 1] - T[k], rtol=1e-12, atol=1e-12)
+        out[k + 1] = x
+    return np.column_stack([units.length_m(out[:, :3]), units.speed_m_s(out[:, 3:6]),
+                            units.mass_kg(out[:, 6])])
+
+
+def cartesian_miss(sol, rhs) -> dict:
+    """How far the Cartesian re-propagation (``cartesian_repropagation``) arrives from the
+    solution's own final node: {"position_km", "velocity_m_s", "mass_kg"} (norms of the
+    differences). The solution's elements, staged in true longitude, and the flown trajectory,
+    integrated in time, are independent computations of one physics: their difference is the
+    whole chain's error (transcription, integration, the conversion of elements)."""
+    flown = cartesian_repropagation(sol, rhs)[-1]
+    end = sol.X_si[-1]
+    return {"position_km": float(np.linalg.norm(flown[:3] - end[:3]) / 1000.0),
+            "velocity_m_s": float(np.linalg.norm(flown[3:6] - end[3:6])),
+            "mass_kg": float(abs(flown[6] - end[6]))}
+
+
 def earth_elements(sol) -> np.ndarray:
     """(N+1, 6) Keplerian elements of an Earth-centred solution's nodes: a [km], e, i [deg],
     RAAN [deg], argument of perigee [deg], true longitude [deg] (RAAN + argp + true anomaly;

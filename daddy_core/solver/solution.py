@@ -75,6 +75,9 @@ class Solution:
     kkt_residual: float | None = None   # solver.optimality (None in plans saved before it)
     t_start: float = 0.0
     time_index: int | None = None   # Problem.time_index: the state's time when staged in angle
+    # Earth-centred solutions solved by ``daddy solve``: trajectory_output.cartesian_miss (the
+    # thrust flown in Cartesian coordinates in time against the final node; None otherwise)
+    cartesian_miss: dict | None = None
     stage_maps: StageMaps | None = field(default=None, repr=False, compare=False)
 
     _ARRAYS = ("X", "U", "stage_dt", "gains_a", "gains_b")
