@@ -42,8 +42,8 @@ def repropagation_miss(problem: Problem, U: np.ndarray, X: np.ndarray | None = N
     rhs calls and usually picks a shorter step); the error control still accepts only steps
     within the tolerances.
 
-    With the trajectory X (N+1, nx) that U was solved on and its stage maps (``StageMaps`` near
-    (X, U)), every stage is re-propagated at once from its own start X_k (``dop853_batch``, the
+    With the trajectory X (N+1, nx) that U was solved on and its stage maps (``StageMaps`` whose
+    radius holds (X, U)), every stage is re-propagated at once from its own start X_k (``dop853_batch``, the
     same steps as one at a time) and the stage defects d_k = DOP853(X_k, U_k) - X_{k+1} are
     carried to the end through the maps' state Jacobians: x_N = X_N + e_N, e_{k+1} = Phi_k e_k
     + d_k, e_0 = x0 - X_0 -- the sequential re-propagation to first order in e, whose neglected
@@ -76,8 +76,9 @@ _LINEAR_REPROPAGATION = 1e-7
 def _linear_repropagation(problem: Problem, U: np.ndarray, X: np.ndarray | None,
                           maps: StageMaps | None) -> np.ndarray | None:
     """x_N of ``repropagation_miss``'s linearised re-propagation, or None when it does not
-    apply (no states or maps, a failed stage, or a deviation beyond _LINEAR_REPROPAGATION)."""
-    if X is None or maps is None or maps.N != problem.N:
+    apply (no states or maps, maps expanded farther from (X, U) than their radius, a failed
+    stage, or a deviation beyond _LINEAR_REPROPAGATION)."""
+    if X is None or maps is None or maps.N != problem.N or not maps.deviation(X, U)[1].all():
         return None
     nx = problem.nx
     try:
