@@ -51,8 +51,7 @@ def earth_cartesian_si(sol, X: np.ndarray | None = None) -> np.ndarray:
     X = sol.X if X is None else X
     L = node_longitudes(sol)
     rv = models.mee_to_cartesian(X[:, :5].T, L, units.gm).T   # every node at once
-    return np.column_stack([units.length_m(rv[:, :3]), units.speed_m_s(rv[:, 3:]),
-                            units.mass_kg(X[:, 6])])
+    return units.cartesian_si(np.column_stack([rv, X[:, 6]]))
 
 
 def cartesian_repropagation(sol, rhs) -> np.ndarray:
@@ -73,8 +72,7 @@ def cartesian_repropagation(sol, rhs) -> np.ndarray:
     for k in range(sol.N):
         x = dop853(rhs, x, sol.U[k], T[k], T[k + 1] - T[k], rtol=1e-12, atol=1e-12)
         out[k + 1] = x
-    return np.column_stack([units.length_m(out[:, :3]), units.speed_m_s(out[:, 3:6]),
-                            units.mass_kg(out[:, 6])])
+    return units.cartesian_si(out)
 
 
 def cartesian_miss(sol, rhs) -> dict:

@@ -119,13 +119,20 @@ def shift(p: DA, dv) -> DA:
     n, q = T.n, c[T.block[2]]                                     # (n(n+1)/2, *shape)
     out = np.empty((T.size,) + shape)
     out[0] = evaluate(DA(c, T), d)
-    # d/dz_a of c_ab z_a z_b at dv is c_ab dv_b (and c_ab dv_a for b; 2 c_aa dv_a when a = b)
-    lin = (q * d[T.triu_j]).reshape(len(q), -1)
-    lin2 = (q * d[T.triu_i]).reshape(len(q), -1)
-    grad = _SCATTER_I[n] @ lin + _SCATTER_J[n] @ lin2
-    out[1:n + 1] = c[1:n + 1] + grad.reshape((n,) + shape)
+    out[1:n + 1] = _gradient_at(c, q, d[T.triu_i], d[T.triu_j], n)
     out[n + 1:] = q
     return DA(out, T)
+
+
+def _gradient_at(c: np.ndarray, q: np.ndarray, di, dj, n: int) -> np.ndarray:
+    """The gradient (n, *shape) at a displacement of order-2 polynomials with coefficients c
+    (M, *shape) and degree-2 block q: d/dz_a of c_ab z_a z_b at dv is c_ab dv_b (and c_ab dv_a
+    for b; 2 c_aa dv_a when a = b), summed by the scatter matrices. di, dj: the displacement
+    of each degree-2 monomial's first and second variable, broadcastable to q."""
+    lin = (q * dj).reshape(len(q), -1)
+    lin2 = (q * di).reshape(len(q), -1)
+    grad = _SCATTER_I[n] @ lin + _SCATTER_J[n] @ lin2
+    return c[1:n + 1] + grad.reshape(c[1:n + 1].shape)
 
 
 # batch size from which ``_shift_stages`` accumulates the gradient one monomial at a time
@@ -139,8 +146,9 @@ def _shift_stages(c: np.ndarray, dv: np.ndarray, T) -> np.ndarray:
     """``shift``'s closed form for a batch of maps with one displacement each -- c (M, m, B)
     the coefficients of m components at B expansion points, dv (n, B) -- without broadcasting
     dv over the m components first (the general path evaluates the value at an (n, m, B)
-    displacement: 70 ms for 4960 stages, where this takes 13). The gradient of component x at
-    dv gains c_ab dv_b for variable a and c_ab dv_a for b (2 c_aa dv_a when a = b)."""
+    displacement: 70 ms for 4960 stages, where this takes 13). Small batches take
+    ``_gradient_at``'s scatter products; large ones accumulate one monomial at a time (each
+    adds c_ab dv_b to variable a and c_ab dv_a to b)."""
     n, m, B = T.n, c.shape[1], c.shape[2]
     q = c[T.block[2]]                                             # (n(n+1)/2, m, B)
     out = np.empty_like(c)
@@ -148,9 +156,7 @@ def _shift_stages(c: np.ndarray, dv: np.ndarray, T) -> np.ndarray:
     out[n + 1:] = q
     grad = out[1:n + 1]
     if B < _SHIFT_LOOP_MIN_BATCH:   # two scatter products over (n(n+1)/2, m B) temporaries
-        lin = (q * dv[T.triu_j][:, None, :]).reshape(len(q), -1)
-        lin2 = (q * dv[T.triu_i][:, None, :]).reshape(len(q), -1)
-        grad[...] = c[1:n + 1] + (_SCATTER_I[n] @ lin + _SCATTER_J[n] @ lin2).reshape(n, m, B)
+        grad[...] = _gradient_at(c, q, dv[T.triu_i][:, None, :], dv[T.triu_j][:, None, :], n)
         return out
     grad[...] = c[1:n + 1]          # one accumulation per monomial and variable of its pair
     tmp = np.empty((m, B))
