@@ -78,12 +78,13 @@ monte-carlo: $(STAMP) $(PLOTS) $(if $(filter dask,$(EXECUTOR)),$(CAMPAIGNS))
 reliability: $(STAMP)
 	cd test && ../$(PY) -m reliability $(if $(QUICK),--quick)
 
-# random initial guesses per case (bench/bench_robustness.py): GUESSES per case, CAP s per solve
+# random initial guesses per case (bench/bench_robustness.py): GUESSES per case, CAP s per solve;
+# PEER=1: the same guesses also to the CasADi + IPOPT transcription (casadi: requirements/optional.txt)
 robustness: $(STAMP)
 	cd bench && for c in double_integrator earth_mars dro_dro; do \
-	  ../$(PY) bench_robustness.py $$c --guesses $(or $(GUESSES),100) --cap $(or $(CAP),60) || exit 1; done; \
+	  ../$(PY) bench_robustness.py $$c --guesses $(or $(GUESSES),100) --cap $(or $(CAP),60) $(if $(PEER),--peer) || exit 1; done; \
 	for c in halo_l2_l1 lyapunov_l1_l2; do \
-	  ../$(PY) bench_robustness.py $$c --guesses $(or $(CR3BP_GUESSES),30) --cap $(or $(CAP),60) || exit 1; done
+	  ../$(PY) bench_robustness.py $$c --guesses $(or $(CR3BP_GUESSES),30) --cap $(or $(CAP),60) $(if $(PEER),--peer) || exit 1; done
 
 bench: $(STAMP)
 	cd bench && ../$(PY) bench_da.py && ../$(PY) bench_solver.py && ../$(PY) bench_replan.py

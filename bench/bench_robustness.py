@@ -5,14 +5,19 @@ rate, the distinct optima found and the solve times (the measurement of PDDP's T
 
     .venv/bin/python bench/bench_robustness.py CASE [--guesses 100] [--seed 0] [--cap 60]
                                                [--jobs 2] [--energy]
-                                               [--globalization trust_region]
+                                               [--globalization trust_region] [--peer]
 
 Success: converged (feasible and KKT residual <= tol_optimality), max violation <= 1e-10, and
 the final mass within WINDOW_KG of the paper's (Tables 6 and 9: the Dyn column, m_N + 500 kg dry
 mass; the double integrator: its closed-form cost). The count of runs feasible in that window
 whatever their KKT residual is printed too (the success of the code before the KKT residual
-became part of ``converged``). The CasADi + IPOPT transcription is not run here (not installed
-on the development machine; it would be benchmark-only, never a dependency).
+became part of ``converged``).
+
+``--peer``: the same guesses also go to a direct transcription, CasADi + IPOPT
+(``casadi_peer.py``; benchmark-only, never a dependency: ``pip install -c requirements/pins.txt
+casadi``), with the same cap, judged the same way on its controls re-flown in daddy's stage
+flows (IPOPT's success status, the re-flown arrival within ``casadi_peer.PEER_MISS``, the mass in
+the window); the two are printed side by side with the guesses each alone solved.
 """
 from __future__ import annotations
 
@@ -52,11 +57,21 @@ def guesses(case_name: str, n: int, seed: int) -> list[np.ndarray]:
     return out[:n]
 
 
+def _in_window(case_name: str, fuel: bool, value: float, is_mass: bool) -> bool:
+    """The final mass within WINDOW_KG of the paper's (a cost: 1e-6 relative)."""
+    ref = PAPER.get(case_name) if fuel or case_name == "double_integrator" else None
+    if ref is None:
+        return True
+    return abs(value - ref) <= (WINDOW_KG if is_mass else 1e-6 * abs(ref))
+
+
 def run_one(job) -> dict:
     """Solve one guess (a worker process)."""
-    case_name, fuel, U0, cap, globalization = job
+    case_name, fuel, U0, cap, globalization, peer = job
     case = load_case(case_name)
     prob = problem_from_case(case)
+    if peer:
+        return run_peer(case, prob, U0, fuel, cap)
     opts = case_options(case, fuel, time_budget_s=cap, globalization=globalization)
     t0 = time.process_time()
     try:
@@ -65,14 +80,50 @@ def run_one(job) -> dict:
         return {"ok": False, "value": float("nan"), "cpu_s": time.process_time() - t0,
                 "reason": f"raised {type(exc).__name__}: {exc}"}
     value = sol.final_mass_kg if sol.final_mass_kg is not None else sol.cost
-    ref = PAPER.get(case_name) if fuel or case_name == "double_integrator" else None
-    in_window = ref is None or (abs(value - ref) <= WINDOW_KG if sol.final_mass_kg is not None
-                                else abs(value - ref) <= 1e-6 * abs(ref))
+    in_window = _in_window(case_name, fuel, value, sol.final_mass_kg is not None)
     feasible = sol.max_violation <= 1e-10 and in_window
     ok = sol.converged and feasible
     return {"ok": ok, "converged": sol.converged, "feasible": feasible, "value": value,
             "cpu_s": time.process_time() - t0, "violation": sol.max_violation,
             "kkt": sol.kkt_residual, "reason": sol.reason if not ok else ""}
+
+
+def run_peer(case, prob, U0, fuel: bool, cap: float) -> dict:
+    """The CasADi + IPOPT transcription from the same guess (``casadi_peer``)."""
+    from casadi_peer import PEER_MISS, solve_peer
+    t0 = time.process_time()
+    try:
+        r = solve_peer(case, prob, U0, fuel, cap)
+    except Exception as exc:  # noqa: BLE001  a crash is a failed run, reported
+        return {"ok": False, "value": float("nan"), "cpu_s": time.process_time() - t0,
+                "reason": f"raised {type(exc).__name__}: {exc}"}
+    feasible = (r.miss <= PEER_MISS and r.violation <= 1e-10
+                and _in_window(case.name, fuel, r.value, case.spacecraft is not None))
+    ok = r.ok_status and feasible
+    return {"ok": ok, "converged": r.ok_status, "feasible": feasible, "value": r.value,
+            "cpu_s": r.cpu_s, "violation": max(r.miss, r.violation), "kkt": None,
+            "reason": "" if ok else f"IPOPT {r.status}, {r.iterations} iterations, re-flown "
+                                    f"miss {r.miss:.1e}"}
+
+
+def _summary(label: str, runs: list, args, fuel: bool, wall: float) -> None:
+    ok = [r for r in runs if r["ok"]]
+    values = sorted(round(r["value"], 2) for r in runs if r.get("converged"))
+    optima = {v: values.count(v) for v in dict.fromkeys(values)}
+    cpu = [r["cpu_s"] for r in runs]
+    kind = "fuel" if fuel else "energy"
+    print(f"{label}: {args.case} {kind}, {len(runs)} guesses (seed {args.seed}, "
+          f"cap {args.cap:g} s, {args.jobs} jobs): success {len(ok)}/{len(runs)} "
+          f"({len(ok) / len(runs):.0%}; feasible in the window whatever the optimality "
+          f"measure: {sum(bool(r.get('feasible')) for r in runs)}); "
+          f"CPU per solve median {statistics.median(cpu):.2f} s, max {max(cpu):.2f} s; wall "
+          f"{wall:.0f} s")
+    print(f"  paper {PAPER.get(args.case)}; converged optima (value: count): "
+          + ", ".join(f"{v:g}: {c}" for v, c in optima.items()))
+    for i, r in enumerate(runs):
+        if not r["ok"]:
+            print(f"  guess {i}: {r['value']:.4f}, violation {r.get('violation', float('nan')):.1e},"
+                  f" {r['cpu_s']:.1f} s: {r['reason'] or 'outside the window'}")
 
 
 def main() -> int:
@@ -85,32 +136,28 @@ def main() -> int:
     ap.add_argument("--energy", action="store_true", help="energy-optimal (default: fuel)")
     ap.add_argument("--globalization", default="line_search",
                     choices=[g.value for g in Globalization])
+    ap.add_argument("--peer", action="store_true",
+                    help="also solve every guess with the CasADi + IPOPT transcription")
     args = ap.parse_args()
     fuel = not args.energy and args.case != "double_integrator"
-    jobs = [(args.case, fuel, U0, args.cap, args.globalization)
-            for U0 in guesses(args.case, args.guesses, args.seed)]
-    wall = time.perf_counter()
-    with concurrent.futures.ProcessPoolExecutor(max(1, args.jobs)) as pool:
-        runs = list(pool.map(run_one, jobs))
-    wall = time.perf_counter() - wall
-    ok = [r for r in runs if r["ok"]]
-    values = sorted(round(r["value"], 2) for r in runs if r.get("converged"))
-    optima = {v: values.count(v) for v in dict.fromkeys(values)}
-    cpu = [r["cpu_s"] for r in runs]
-    kind = "fuel" if fuel else "energy"
-    print(f"{args.case} {kind}, {args.globalization}, {len(runs)} guesses (seed {args.seed}, "
-          f"cap {args.cap:g} s, {args.jobs} jobs): success {len(ok)}/{len(runs)} "
-          f"({len(ok) / len(runs):.0%}; feasible in the window whatever the KKT residual: "
-          f"{sum(bool(r.get('feasible')) for r in runs)}); "
-          f"CPU per solve median {statistics.median(cpu):.2f} s, max {max(cpu):.2f} s; wall "
-          f"{wall:.0f} s")
-    ref = PAPER.get(args.case)
-    print(f"  paper {ref}; converged optima (value: count): "
-          + ", ".join(f"{v:g}: {c}" for v, c in optima.items()))
-    for i, r in enumerate(runs):
-        if not r["ok"]:
-            print(f"  guess {i}: {r['value']:.4f}, violation {r.get('violation', float('nan')):.1e},"
-                  f" {r['cpu_s']:.1f} s: {r['reason'] or 'outside the window'}")
+    U0s = guesses(args.case, args.guesses, args.seed)
+    solvers = [(f"daddy (dyn, {args.globalization})", False)]
+    if args.peer:
+        solvers.append(("CasADi + IPOPT", True))
+    results = {}
+    for label, peer in solvers:
+        jobs = [(args.case, fuel, U0, args.cap, args.globalization, peer) for U0 in U0s]
+        wall = time.perf_counter()
+        with concurrent.futures.ProcessPoolExecutor(max(1, args.jobs)) as pool:
+            runs = list(pool.map(run_one, jobs))
+        results[label] = runs
+        _summary(label, runs, args, fuel, time.perf_counter() - wall)
+    if args.peer:
+        (la, a), (lb, b) = results.items()
+        only_a = [i for i, (x, y) in enumerate(zip(a, b)) if x["ok"] and not y["ok"]]
+        only_b = [i for i, (x, y) in enumerate(zip(a, b)) if y["ok"] and not x["ok"]]
+        print(f"same guesses: {la} alone solved {len(only_a)} {only_a}; {lb} alone solved "
+              f"{len(only_b)} {only_b}")
     return 0
 
 
