@@ -118,7 +118,8 @@ def _summary(label: str, runs: list, args, fuel: bool, wall: float) -> None:
           f"measure: {sum(bool(r.get('feasible')) for r in runs)}); "
           f"CPU per solve median {statistics.median(cpu):.2f} s, max {max(cpu):.2f} s; wall "
           f"{wall:.0f} s")
-    print(f"  paper {PAPER.get(args.case)}; converged optima (value: count): "
+    ref = PAPER.get(args.case) if fuel or args.case == "double_integrator" else None
+    print(f"  paper {ref if ref is not None else '-'}; converged optima (value: count): "
           + ", ".join(f"{v:g}: {c}" for v, c in optima.items()))
     for i, r in enumerate(runs):
         if not r["ok"]:
