@@ -588,6 +588,24 @@ def test_trust_region_reaches_the_same_optima_as_the_line_search(stages):
         assert sol.X[-1, 2] == pytest.approx(closed_form, rel=1e-9)
 
 
+def test_a_line_search_at_its_iteration_bound_falls_back_to_the_trust_region(capsys):
+    """``SolverOptions.tr_fallback``: a line-search DDP solve that runs into ddp_max_iter is
+    solved again with the trust region, which the rest of the solve keeps; the landing with a
+    cost linear in the control still reaches its closed-form mass (and without the fallback
+    too: the switch changes the path, not the answer)."""
+    from daddy_core.da import functions as dm
+    prob = _landing(stage_dt=np.full(17, 80.0 / 17), stage_cost=lambda x, u, dt, hom: u[0] * 0.0,
+                    g_ineq=lambda x, u, dt: dm.stack([u[0] - 45.0, -u[0]]))
+    closed_form = 10.0 * np.exp(-(30.0 + 1.62 * 80.0) / 3000.0)
+    for fallback in (True, False):
+        sol = solve(prob, np.full((17, 1), 16.0),
+                    options=SolverOptions(ddp_max_iter=3, tr_fallback=fallback, verbose=True))
+        fell_back = "again from its start with the trust region" in capsys.readouterr().out
+        assert fell_back is fallback
+        assert sol.converged and sol.max_violation <= 1e-10, sol.reason
+        assert sol.X[-1, 2] == pytest.approx(closed_form, rel=1e-9)
+
+
 def test_globalization_is_validated():
     from daddy_core.solver import Globalization
     assert SolverOptions(globalization="trust_region").globalization is Globalization.TRUST_REGION

@@ -93,6 +93,9 @@ class SolverOptions:
             per-stage radius and the forward pass's clamp) and the sweep runs again, instead
             of one shorter step length for every stage; an accepted step that a bound held
             back grows that bound by (1 + tr_kappa).
+        tr_fallback: with the line search, a DDP solve that runs into ddp_max_iter is solved
+            again from its start with the trust region, which the rest of the solve keeps
+            (``aul._trust_region_fallback``: why, and its ratio tolerance).
         tr_ratio_tol, tr_kappa: the trust region accepts a step when |actual / expected - 1|
             <= tr_ratio_tol and then grows its radius by (1 + tr_kappa), else shrinks it by
             (1 - tr_kappa) and sweeps again on the same expansions (PDDP's Table 2: 0.1, 0.25;
@@ -178,6 +181,7 @@ class SolverOptions:
     globalization: Globalization = Globalization.LINE_SEARCH
     stage_trust: bool = True
     tr_ratio_tol: float = 0.1
+    tr_fallback: bool = True
     tr_kappa: float = 0.25
     restore_warm_start: bool = False
     polish_from_ddp_maps: bool = False
