@@ -23,7 +23,7 @@ class AULResult(StepResult):
     max_violation: float
     rho: float
     gains: Gains | None   # of the last backward sweep (None if no DDP iteration ran)
-    globalization: Globalization   # the DDP solves' at the end (``_trust_region_fallback``)
+    opts: SolverOptions   # the DDP solves' at the end (``_trust_region_fallback`` switches them)
 
 
 def update_multipliers(mult: Multipliers, g, gt, opts: SolverOptions) -> Multipliers:
@@ -151,16 +151,16 @@ def aul(st: Stages, method: Method, opts: SolverOptions, stats: DDPStats,
                      f"cost {st.cost:.6e}, max violation {gmax:.2e}")
         if deadline is not None and time.perf_counter() > deadline:
             return AULResult(False, it, Status.TIME_BUDGET, st, mult, gmax, rho_last, gains,
-                             opts.globalization)
+                             opts)
         if gmax <= opts.tol_aul:
             return AULResult(True, it, Status.AUL_CONVERGED, st, mult, gmax, rho_last, gains,
-                             opts.globalization)
+                             opts)
         history.append(gmax)
         capped = capped + 1 if _at_cap(mult, opts) else 0   # this DDP solve's penalty
         if _stalled(history, capped, opts):
             return AULResult(False, it, Status.AUL_STALLED, st, mult, gmax, rho_last, gains,
-                             opts.globalization)
+                             opts)
         mult = update_multipliers(mult, g, gt, opts)
         st = st.with_costs(mult, hom)
     return AULResult(False, opts.aul_max_iter, Status.AUL_MAX_ITER, st, mult, gmax, rho_last,
-                     gains, opts.globalization)
+                     gains, opts)

@@ -96,7 +96,7 @@ def continuation(problem: Problem, X, U, steps: tuple, method: Method, opts: Sol
         st = (Stages(problem, X, U, mult, hom, opts.eps_da, F=F) if res is None
               else res.stages.with_costs(mult, hom))
         res = aul(st, method, opts, stats, deadline, progress, rho0=rho)
-        opts = opts.with_(globalization=res.globalization)   # aul's trust-region fallback
+        opts = res.opts   # aul's trust-region fallback, with its ratio tolerance, stays
         gains = res.gains or gains
         aul_iterations += res.iterations
         mult = res.mult
