@@ -106,8 +106,7 @@ def _trust_region_fallback(res, opts: SolverOptions) -> bool:
     1e-3 and the solve ran its 200 iterations (977.5 kg, unconverged). The trust region, which
     accepts only steps its model predicts, kept to the DROs (run from the start it converged:
     993.709 kg energy-optimal, 995.557 kg fuel-optimal, the paper's Hess / Q columns; after the
-    line search's 200 iterations the fuel solve ends near, 995.42 kg, but unconverged) with a
-    ratio tolerance of
+    line search's 200 iterations the same 995.557 kg) with a ratio tolerance of
     ``_FALLBACK_RATIO_TOL`` (0.5 and 0.9: the same optima; the papers' 0.1, the option's default
     when the trust region is asked for: radii of 1e-5-5e-4 and an energy step unconverged after
     95 DDP iterations, 991.66 kg). It is 2-6x slower where the line search converges (Earth-
