@@ -165,7 +165,8 @@ def _report(sol: Solution) -> None:
         print(f"  flown in Cartesian coordinates in time (DOP853), the arrival misses the final "
               f"node by {m['position_km']:.3e} km, {m['velocity_m_s']:.3e} m/s, "
               f"{m['mass_kg']:.1e} kg")
-    print(f"  iterations: homotopy {it['homotopy']}, AUL {it['aul']}, DDP {it['ddp']}, "
+    print(f"  iterations: restoration {it.get('restore', 0)}, homotopy {it['homotopy']}, "
+          f"AUL {it['aul']}, DDP {it['ddp']}, "
           f"Newton {it['newton']}, KKT {it.get('kkt', 0)}; "
           f"polynomial share {sol.polynomial_share:.0%}")
     print(f"  runtime {rt['total']:.2f} s (DDP {rt['ddp']:.2f} s, Newton {rt['newton']:.2f} s)")

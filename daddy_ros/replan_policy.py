@@ -85,7 +85,7 @@ class ReplanPolicy:
         warm = cold.with_(homotopy=cold.homotopy[-1:], ddp_min_iter=1, mu_init=WARM_MU_INIT,
                           short_step=0.5, carry_rho=True, aul_stall_iter=0,
                           newton_stall_iter=0, tol_optimality=math.inf,
-                          restore_warm_start=bool(config.restore_first), tol_aul=warm_tol_aul,
+                          restore_start=bool(config.restore_first), tol_aul=warm_tol_aul,
                           polish_from_ddp_maps=True,
                           newton_active_tol=max(WARM_ACTIVE_TOL, cold.newton_active_tol),
                           # one DDP step from a restored start: a stage bound would only hold

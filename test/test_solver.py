@@ -462,8 +462,10 @@ def test_an_infeasible_problem_fails_fast_and_names_the_constraints_it_cannot_me
     # instead of running its aul_max_iter iterations, and the polishing stops as fast
     assert "stalled with the penalty at mu_max" in sol.reason
     assert sol.iterations["aul"] < SolverOptions().aul_max_iter
-    # (by its stall or no-descent rule, far from its newton_max_iter)
+    # (by its stall or no-descent rule, far from its newton_max_iter), and so does the
+    # restoration of the start (SolverOptions.restore_start), which DDP then does without
     assert sol.iterations["newton"] <= 2 * SolverOptions().newton_stall_iter
+    assert 0 < sol.iterations["restore"] <= SolverOptions().newton_stall_iter + 1
     assert sol.violations[0]["name"] == "g_teq[0]" and sol.violations[0]["stage"] is None
     again = Solution.from_json(sol.to_json())
     assert again.violations == sol.violations
@@ -604,6 +606,46 @@ def test_a_line_search_at_its_iteration_bound_falls_back_to_the_trust_region(cap
         assert fell_back is fallback
         assert sol.converged and sol.max_violation <= 1e-10, sol.reason
         assert sol.X[-1, 2] == pytest.approx(closed_form, rel=1e-9)
+
+
+def test_a_cold_start_is_restored_to_feasibility_before_ddp(capsys):
+    """``SolverOptions.restore_start`` (default on): Newton drives a random guess to the
+    terminal constraints and the thrust bound before DDP starts; the answer is the closed form
+    with and without it (the restoration changes where DDP starts, not the optimum)."""
+    case = load_case("double_integrator")
+    prob = problem_from_case(case)
+    U0 = np.random.default_rng(7).uniform(-1.0, 1.0, size=(prob.N, prob.nu))
+    sols = {}
+    for restore in (True, False):
+        sols[restore] = solve(prob, U0, options=case_options(case, False, verbose=True,
+                                                              restore_start=restore))
+        out = capsys.readouterr().out
+        restored = [line for line in out.splitlines() if "start restored by Newton" in line]
+        assert len(restored) == int(restore)
+        # a converged restoration: DDP starts from a trajectory that meets every constraint
+        assert all("active constraints below tol_newton" in line for line in restored)
+        assert (sols[restore].iterations["restore"] > 0) is restore
+        assert sols[restore].converged, sols[restore].reason
+    assert sols[True].cost == pytest.approx(sols[False].cost, rel=1e-9)
+
+
+def test_a_feasible_iterate_whose_ddp_solve_ran_into_its_bound_gets_one_more_solve():
+    """``aul._ends_feasible``: the augmented Lagrangian stops on a feasible iterate when its DDP
+    solve converged, or when the one before it ran into ddp_max_iter too -- never on the first
+    feasible iterate that DDP's iteration bound cut off."""
+    from types import SimpleNamespace
+
+    from daddy_core.solver.aul import _ends_feasible
+    from daddy_core.solver.results import Status
+    opts = SolverOptions()
+    bound, done = (SimpleNamespace(status=s) for s in (Status.DDP_MAX_ITER,
+                                                       Status.DDP_CONVERGED))
+    feasible, infeasible = 0.5 * opts.tol_aul, 2.0 * opts.tol_aul
+    assert _ends_feasible(done, feasible, 0, opts)
+    assert not _ends_feasible(done, infeasible, 0, opts)
+    assert not _ends_feasible(bound, feasible, 0, opts)
+    assert _ends_feasible(bound, feasible, 1, opts)
+    assert not _ends_feasible(bound, infeasible, 1, opts)
 
 
 def test_globalization_is_validated():

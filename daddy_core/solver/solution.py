@@ -43,7 +43,8 @@ class Solution:
             the solved states stay within 1e-7 of the flow, every stage integrated from its own
             start and the defects carried through the stage maps, equal to round-off:
             ``solve.repropagation_miss``); inf when the re-propagation failed (JSON: "inf").
-        iterations: {homotopy, aul, ddp, newton}; runtime_s: {total, ddp, newton, ...}.
+        iterations: {restore, homotopy, aul, ddp, newton, kkt} (restore: Newton's on the
+            start, newton: the polishing's); runtime_s: {total, ddp, newton, ...}.
         history: per-homotopy-step summaries; units: {lu_km, tu_s, mu_kg, thrust_unit_n}.
         stage_maps: the last stage maps (``StageMaps``), in memory only (not in JSON/NPZ): a
             warm start from this solution rolls out and restores with them.

@@ -142,6 +142,7 @@ class _End:
     optimality: Optimality | None = None
     kkt_iterations: int = 0
     kkt_reason: str = ""
+    restore_iterations: int = 0   # Newton's on the start (``SolverOptions.restore_start``)
 
 
 def solve(problem: Problem, u_guess=None, method: Method | str = Method.DYN,
@@ -188,19 +189,19 @@ def solve(problem: Problem, u_guess=None, method: Method | str = Method.DYN,
 def _warm_start(problem: Problem, U0, warm: WarmStart, opts: SolverOptions, clock: _Clock,
                 progress) -> _Start:
     """The initial rollout (through the warm start's maps where they reach) and, with
-    ``opts.restore_warm_start``, Newton's restoration of feasibility."""
+    ``opts.restore_start``, Newton's restoration of feasibility."""
     maps = warm.maps
     if maps is not None and maps.N != problem.N:
         raise DaddyError(f"maps cover {maps.N} stages, the problem has {problem.N}")
     # a start for the Newton restoration only needs to be near (its residuals are exact): the
     # maps then serve stages up to map_reach radii
-    reach = opts.map_reach if opts.restore_warm_start else 1.0
+    reach = opts.map_reach if opts.restore_start else 1.0
     X = problem.rollout(U0) if maps is None else maps.rollout(problem, U0, reach)[0]
     t0 = clock.lap("rollout", clock.start)
     if not np.all(np.isfinite(X)):
         raise DaddyError("the initial guess propagates to a non-finite state")
     start = _Start(X, U0)
-    if opts.restore_warm_start:
+    if opts.restore_start:
         res = newton.restore(problem, X, U0, opts, clock.deadline, maps=maps)
         start.restore_iterations = res.iterations
         if res.converged:
@@ -213,7 +214,7 @@ def _warm_start(problem: Problem, U0, warm: WarmStart, opts: SolverOptions, cloc
         elif maps is not None and reach > 1:
             start.X = maps.rollout(problem, U0)[0]   # DDP starts from a consistent trajectory
         if progress:
-            progress(f"warm start restored by Newton: {res.iterations} iterations, max violation"
+            progress(f"start restored by Newton: {res.iterations} iterations, max violation"
                      f" {res.max_violation:.2e} ({res.reason})")
     clock.lap("restore", t0)
     return start
@@ -227,11 +228,12 @@ def _finish(problem: Problem, hres: HomotopyResult, start: _Start, polish: bool,
     maps = start.restored.maps if start.restored is not None else None
     if np.array_equal(st.X, X):
         maps = StageMaps.of(st.F, st.X, st.U, opts.eps_da)
-    end = _End(X, U, maps, hres.converged, hres.reason, start.restore_iterations)
+    end = _End(X, U, maps, hres.converged, hres.reason, 0,
+               restore_iterations=start.restore_iterations)
     fallback = start.restored is not None and not hres.converged
-    if fallback:  # DDP did not finish: return the feasible, Newton-restored warm start
+    if fallback:  # DDP did not finish: return the feasible, Newton-restored start
         end.X, end.U = start.restored.X, start.restored.U
-        end.reason += "; returned the Newton-restored warm start"
+        end.reason += "; returned the Newton-restored start"
     # a DDP that took no step from the Newton-restored start (ddp_stop_on_prediction) leaves a
     # trajectory that meets the constraints to tol_newton: polishing would repeat its residual
     untouched = (start.restored is not None and np.array_equal(end.X, start.restored.X)
@@ -327,9 +329,9 @@ def _assemble(problem: Problem, end: _End, hres: HomotopyResult, steps: tuple, m
         final_mass_kg=float(X[-1, m_idx] * units.mu_kg) if m_idx is not None else None,
         propellant_kg=float((X[0, m_idx] - X[-1, m_idx]) * units.mu_kg)
         if m_idx is not None else None, repropagation_miss=miss,
-        iterations={"homotopy": len(hres.history), "aul": hres.aul_iterations,
-                    "ddp": stats.iterations, "newton": end.newton_iterations,
-                    "kkt": end.kkt_iterations},
+        iterations={"restore": end.restore_iterations, "homotopy": len(hres.history),
+                    "aul": hres.aul_iterations, "ddp": stats.iterations,
+                    "newton": end.newton_iterations, "kkt": end.kkt_iterations},
         runtime_s={"total": time.perf_counter() - clock.start, "rollout": t["rollout"],
                    "restore": t["restore"], "ddp": t["ddp"], "newton": t["newton"],
                    "forward": stats.forward_s, "expansion": stats.expansion_s,
