@@ -629,6 +629,18 @@ def test_a_cold_start_is_restored_to_feasibility_before_ddp(capsys):
     assert sols[True].cost == pytest.approx(sols[False].cost, rel=1e-9)
 
 
+def test_a_newton_run_whose_residual_stays_put_has_stalled():
+    """``newton._flat``: three outer iterations in a row that moved the exact residual by under
+    1 % stop a run (the Earth-Mars restoration from the paper's guess sat at 35.16 for seven);
+    a detour that comes back, or a slow but steady fall, does not."""
+    from daddy_core.solver.newton import _flat
+    assert _flat([1.25, 1.24, 35.16, 35.16, 35.16, 35.16])
+    assert not _flat([35.16, 35.16, 35.16])                 # too few iterations to tell
+    assert not _flat([0.23, 0.23, 770.0, 64.0, 12.0])       # the halo's converging detour
+    assert not _flat([8.8, 8.5, 8.3, 8.0, 7.8])             # 2-4 % per iteration
+    assert not _flat([2.0, 2.0, 2.0, 1.0])                  # moved in the last one
+
+
 def test_a_feasible_iterate_whose_ddp_solve_ran_into_its_bound_gets_one_more_solve():
     """``aul._ends_feasible``: the augmented Lagrangian stops on a feasible iterate when its DDP
     solve converged, or when the one before it ran into ddp_max_iter too -- never on the first
