@@ -279,8 +279,9 @@ def _flat(current: list) -> bool:
 
 def restore(problem: Problem, X, U, opts: SolverOptions, deadline: float | None = None,
             maps: StageMaps | None = None) -> NewtonResult:
-    """A feasible start for DDP from a warm start's (X, U): Newton to opts.tol_newton, its
-    derivatives from ``maps`` (the previous plan's) re-centred where they reach; a solve stopped
+    """A feasible start for DDP from a guess's (X, U) (``SolverOptions.restore_start``): Newton
+    to opts.tol_newton, its derivatives from ``maps`` (a warm start's, the previous plan's)
+    re-centred where they reach, else expanded afresh; a solve stopped
     later by its time budget still returns a trajectory that meets every constraint."""
     return newton(problem, X, U, opts, deadline, maps)
 

@@ -119,8 +119,9 @@ class SolverOptions:
             iterations on one polynomial model; newton_ls_shrink, newton_ls_max_halvings: the
             backtracking of an inner step (it must reduce the model's max residual).
         newton_stall_iter: stop (``Status.NEWTON_STALLED``) when the best residual did not
-            halve over this many outer iterations (0: never): each outer iteration converges
-            its model at a Newton rate, so a run this slow is one that will not converge.
+            halve over this many outer iterations, or the residual stopped moving
+            (``newton._flat``; 0: neither): each outer iteration converges its model at a Newton
+            rate, so a run this slow is one that will not converge.
         newton_cv_ratio: the convergence-rate threshold (eps_CV, paper Alg. 5).
         newton_active_tol: an inequality with g > -tol is treated as active.
         newton_regularisation: diagonal added to Delta Delta^T if it is not positive definite.

@@ -30,7 +30,8 @@ class Status(Enum):
     NEWTON_NAN = "constraint evaluation produced NaN"
     NEWTON_SINGULAR = "Delta Delta^T is singular"
     NEWTON_NO_DESCENT = "no descent on the constraint model"
-    NEWTON_STALLED = "max residual did not halve over newton_stall_iter iterations"
+    NEWTON_STALLED = ("max residual did not halve over newton_stall_iter iterations or "
+                      "stopped moving")
     # KKT polishing
     KKT_CONVERGED = "KKT residual below tol_optimality"
     KKT_MAX_ITER = "kkt_max_iter reached"
