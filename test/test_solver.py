@@ -653,11 +653,11 @@ def test_a_feasible_iterate_whose_ddp_solve_ran_into_its_bound_gets_one_more_sol
     bound, done = (SimpleNamespace(status=s) for s in (Status.DDP_MAX_ITER,
                                                        Status.DDP_CONVERGED))
     feasible, infeasible = 0.5 * opts.tol_aul, 2.0 * opts.tol_aul
-    assert _ends_feasible(done, feasible, 0, opts)
-    assert not _ends_feasible(done, infeasible, 0, opts)
-    assert not _ends_feasible(bound, feasible, 0, opts)
-    assert _ends_feasible(bound, feasible, 1, opts)
-    assert not _ends_feasible(bound, infeasible, 1, opts)
+    assert _ends_feasible(done, feasible, False, opts)
+    assert not _ends_feasible(done, infeasible, False, opts)
+    assert not _ends_feasible(bound, feasible, False, opts)
+    assert _ends_feasible(bound, feasible, True, opts)
+    assert not _ends_feasible(bound, infeasible, True, opts)
 
 
 def test_globalization_is_validated():

@@ -116,12 +116,12 @@ def _trust_region_fallback(res, opts: SolverOptions) -> bool:
             and opts.globalization is Globalization.LINE_SEARCH)
 
 
-def _ends_feasible(res, gmax: float, bounded: int, opts: SolverOptions) -> bool:
+def _ends_feasible(res, gmax: float, after_cut_off: bool, opts: SolverOptions) -> bool:
     """A feasible iterate ends the augmented Lagrangian when its DDP solve ended on its own
-    stopping test -- or, after one that ran into its iteration bound, when the next solve did
-    too (``bounded``: such solves in a row before this one). Alg. 4 stops on the violation
-    alone, its inner solves assumed converged; a solve cut off by its bound is not optimal,
-    so the loop gives DDP one more solve from there, under the updated multipliers.
+    stopping test -- or when the solve before it (``after_cut_off``) also ran into its
+    iteration bound at a feasible point. Alg. 4 stops on the violation alone, its inner solves
+    assumed converged; a solve cut off by its bound is not optimal, so the loop gives DDP one
+    more solve from there, under the updated multipliers.
 
     Why: DRO->DRO over three revolutions from a restored start, last homotopy step (delta =
     1e-4): the trust region's DDP ran its 200 iterations to a feasible point, the loop stopped
@@ -133,7 +133,7 @@ def _ends_feasible(res, gmax: float, bounded: int, opts: SolverOptions) -> bool:
     340 s instead of 141 for the same 925.207 kg, still unconverged after the KKT polishing."""
     if gmax > opts.tol_aul:
         return False
-    return res.status is not Status.DDP_MAX_ITER or bounded >= 1
+    return res.status is not Status.DDP_MAX_ITER or after_cut_off
 
 
 def aul(st: Stages, method: Method, opts: SolverOptions, stats: DDPStats,
@@ -149,7 +149,7 @@ def aul(st: Stages, method: Method, opts: SolverOptions, stats: DDPStats,
     rho, rho_last = rho0, opts.rho_init if rho0 is None else rho0
     radius = math.inf
     history, capped = [], 0   # max violation after each DDP solve; solves at mu_max in a row
-    bounded = 0               # feasible DDP solves in a row that ran into ddp_max_iter
+    cut_off = False           # the last DDP solve ran into ddp_max_iter at a feasible point
     for it in range(1, opts.aul_max_iter + 1):
         res = ddp(st, method, opts, stats, deadline, rho0=rho, radius0=radius)
         if _trust_region_fallback(res, opts):
@@ -172,10 +172,10 @@ def aul(st: Stages, method: Method, opts: SolverOptions, stats: DDPStats,
         if deadline is not None and time.perf_counter() > deadline:
             return AULResult(False, it, Status.TIME_BUDGET, st, mult, gmax, rho_last, gains,
                              opts)
-        if _ends_feasible(res, gmax, bounded, opts):
+        if _ends_feasible(res, gmax, cut_off, opts):
             return AULResult(True, it, Status.AUL_CONVERGED, st, mult, gmax, rho_last, gains,
                              opts)
-        bounded = bounded + 1 if gmax <= opts.tol_aul else 0
+        cut_off = gmax <= opts.tol_aul   # (feasible and not ended: DDP ran into its bound)
         history.append(gmax)
         capped = capped + 1 if _at_cap(mult, opts) else 0   # this DDP solve's penalty
         if _stalled(history, capped, opts):

@@ -228,7 +228,7 @@ def _finish(problem: Problem, hres: HomotopyResult, start: _Start, polish: bool,
     maps = start.restored.maps if start.restored is not None else None
     if np.array_equal(st.X, X):
         maps = StageMaps.of(st.F, st.X, st.U, opts.eps_da)
-    end = _End(X, U, maps, hres.converged, hres.reason, 0,
+    end = _End(X, U, maps, hres.converged, hres.reason, newton_iterations=0,
                restore_iterations=start.restore_iterations)
     fallback = start.restored is not None and not hres.converged
     if fallback:  # DDP did not finish: return the feasible, Newton-restored start
