@@ -629,6 +629,33 @@ def test_a_cold_start_is_restored_to_feasibility_before_ddp(capsys):
     assert sols[True].cost == pytest.approx(sols[False].cost, rel=1e-9)
 
 
+def test_a_cold_guess_newton_cannot_restore_falls_back_to_the_restored_ballistic_start():
+    """``solve._restore_ballistic``: a random DRO->DRO guess (thrust up to u_max, uniform
+    directions) whose restoration stalls gets the ballistic trajectory restored instead, and
+    DDP from there reaches the paper guess's energy optimum; the paper's 1e-6 N guess, which
+    flies the ballistic trajectory already, does not repeat its stalled restoration."""
+    case = load_case("dro_dro")
+    prob = problem_from_case(case)
+    rng = np.random.default_rng(28)   # (a seed whose guess stalls the restoration: 6 of 100)
+    d = rng.normal(size=(prob.N, prob.nu))
+    U0 = d / np.linalg.norm(d, axis=1, keepdims=True) * rng.uniform(0, 1, (prob.N, 1)) * prob.u_max
+    lines = []
+    sol = solve(prob, U0, options=case_options(case, False), progress=lines.append)
+    fallback = [line for line in lines if "ballistic start" in line]
+    assert len(fallback) == 1 and "active constraints below tol_newton" in fallback[0], lines
+    assert sol.converged, sol.reason
+    paper_guess = np.full((prob.N, prob.nu), float(case.units.thrust(1e-6)))
+    ref = solve(prob, paper_guess, options=case_options(case, False))
+    assert sol.final_mass_kg == pytest.approx(ref.final_mass_kg, abs=1e-3)
+
+    em = load_case("earth_mars")
+    em_prob = problem_from_case(em)
+    lines.clear()
+    solve(em_prob, np.full((em_prob.N, em_prob.nu), float(em.units.thrust(1e-6))),
+          options=case_options(em, False, time_budget_s=5.0), progress=lines.append)
+    assert any("start restored by Newton" in line for line in lines)   # it stalls ...
+    assert not any("ballistic" in line for line in lines)              # ... and is not repeated
+
 def test_a_newton_run_whose_residual_stays_put_has_stalled():
     """``newton._flat``: three outer iterations in a row that moved the exact residual by under
     1 % stop a run (the Earth-Mars restoration from the paper's guess sat at 35.16 for seven);

@@ -135,8 +135,10 @@ class SolverOptions:
             arrival plans polished this way missed their target by more.
     Start:
         restore_start: before DDP, drive the initial guess -- cold or warm -- to feasibility
-            with Newton (``newton.restore``); when Newton does not get there (it stalls, e.g.
-            from a ballistic guess far from the target), DDP starts from the guess itself. If
+            with Newton (``newton.restore``); when Newton does not get there from a cold
+            guess that thrusts, it restores the ballistic trajectory (zero control) instead;
+            when that stalls too (e.g. Earth-Mars: the ballistic flight is far from Mars), DDP
+            starts from the guess itself. If
             DDP does not converge (e.g. the time budget), the solve returns the restored
             feasible iterate (converged=False, with the reason). Why it is the default, for cold
             starts too: the augmented Lagrangian starts with a penalty of mu_init, under which
@@ -145,7 +147,8 @@ class SolverOptions:
             flyby at 4,400 km, where the line search crawled at steps of 1e-4 until the time
             budget ran out; from the restored guess the energy step starts feasible and stays
             near it (robustness harness, random guesses: DRO->DRO 91 -> 96 of 100, halo 18 -> 21
-            of 30, Earth-Mars 100 of 100 either way). From the paper's near-zero guess the
+            of 30, Earth-Mars 100 of 100 either way; with the ballistic fallback DRO 100 of 100,
+            halo 28 of 30). From the paper's near-zero guess the
             restoration converges on the CR3BP transfers (same optima) and stalls on Earth-Mars
             (the guess is used as before).
         map_reach: Newton and the restoration's rollout re-centre stage maps up to this many

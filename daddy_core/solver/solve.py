@@ -204,6 +204,11 @@ def _warm_start(problem: Problem, U0, warm: WarmStart, opts: SolverOptions, cloc
     if opts.restore_start:
         res = newton.restore(problem, X, U0, opts, clock.deadline, maps=maps)
         start.restore_iterations = res.iterations
+        if not res.converged and maps is None and warm.duals is None:   # a cold start
+            ballistic = _restore_ballistic(problem, X, U0, res, opts, clock, progress)
+            if ballistic is not None:
+                start.restore_iterations += ballistic.iterations
+                res = ballistic if ballistic.converged else res
         if res.converged:
             start.X, start.U, start.restored = res.X, res.U, res
             if res.maps is not None:
@@ -218,6 +223,36 @@ def _warm_start(problem: Problem, U0, warm: WarmStart, opts: SolverOptions, cloc
                      f" {res.max_violation:.2e} ({res.reason})")
     clock.lap("restore", t0)
     return start
+
+
+# a ballistic trajectory within this fraction of the state's size (max |x|, normalised units)
+# of the guess's is the guess itself as far as the restoration can tell (``_restore_ballistic``;
+# the catalogue's 1e-6 N guesses: <= 8e-4; the robustness harness's random guesses: >= 0.07)
+_SAME_START_RTOL = 1e-2
+
+
+def _restore_ballistic(problem: Problem, X, U0, stalled: newton.NewtonResult,
+                       opts: SolverOptions, clock: _Clock,
+                       progress) -> newton.NewtonResult | None:
+    """A cold guess (X, U0) that Newton could not restore: Newton's restoration of the
+    ballistic trajectory (zero control) instead, which DDP starts from if it converged (else
+    DDP starts from the guess); None when skipped. Why: a random guess that thrusts into a region where the
+    constraint model is poor (on DRO->DRO, a lunar flyby) stalls the restoration and then takes
+    DDP's first augmented-Lagrangian solves through the same region, where they crawl to the
+    time budget; the ballistic trajectory stays near the departure orbit, and its restoration
+    converged on every such guess measured (DRO->DRO, halo). Skipped when the guess flies the
+    ballistic trajectory already (the default 1e-6 guess), where it would only repeat the
+    stall."""
+    Ub = np.zeros_like(U0)
+    Xb = problem.rollout(Ub)
+    if (not np.all(np.isfinite(Xb))
+            or np.max(np.abs(Xb - X)) <= _SAME_START_RTOL * np.max(np.abs(X))):
+        return None
+    res = newton.restore(problem, Xb, Ub, opts, clock.deadline)
+    if progress:
+        progress(f"guess not restored ({stalled.reason}); ballistic start: {res.iterations} "
+                 f"iterations, max violation {res.max_violation:.2e} ({res.reason})")
+    return res
 
 
 def _finish(problem: Problem, hres: HomotopyResult, start: _Start, polish: bool,
