@@ -752,3 +752,23 @@ def test_a_line_search_that_fails_at_a_few_stages_bounds_those_stages_only():
     assert actual < 0
     assert np.sum(np.abs(trial.U[:, 0]) > 0.45) > prob.N // 10
     assert D._blamed_stages(st, trial, stage_costs, expected, actual, tol).size == 0
+
+
+def test_a_trust_region_step_that_fails_at_a_few_stages_bounds_those_stages_only():
+    """The trust region's rejected step blames stages as the line search's first trial does
+    (``ddp._trust_region_step``): the first full step across the 0.55 bound comes back as a
+    ``Blame`` of stages that crossed it, not as a rejection that shrinks every stage's region;
+    with and without it the trust region reaches the line search's optimum."""
+    from daddy_core.solver import ddp as D
+
+    prob, st, gains, trial, *_ = _first_step_across_a_bound(0.55)
+    crossed = np.flatnonzero(np.abs(trial.U[:, 0]) > 0.55)
+    opts = SolverOptions(globalization="trust_region")
+    out = D._trust_region_step(st, gains, False, opts, st.cost)
+    assert isinstance(out, D.Blame) and set(out.stages) <= set(crossed)
+    assert D._trust_region_step(st, gains, False, opts.with_(stage_trust=False), st.cost) is None
+    ref = solve(prob, st.U)
+    for stage_trust in (True, False):
+        sol = solve(prob, st.U, options=opts.with_(stage_trust=stage_trust))
+        assert sol.converged, sol.reason
+        np.testing.assert_allclose(sol.U, ref.U, atol=1e-6)

@@ -19,7 +19,7 @@ import numpy as np
 from .. import da
 from ..errors import DaddyError
 from ..problem import Problem
-from .lagrangian import (Multipliers, augmented_cost, augmented_cost_terms,
+from .lagrangian import (Multipliers, augmented_cost_terms,
                          augmented_stage_cost, augmented_terminal_cost)
 from .options import Globalization, Method, SolverOptions, Sweep
 from .results import Status, StepResult
@@ -495,7 +495,7 @@ def _accepted(expected: float, actual: float, J: float, Jn: float, lo: float, hi
 
 
 def _blamed_stages(st: Stages, trial: Trial, stage_costs: np.ndarray, expected: float,
-                   actual: float, tol: float) -> np.ndarray:
+                   actual: float, tol: float, worth: float | None = None) -> np.ndarray:
     """The stages whose stage-cost model failed on ``trial`` (its augmented stage costs
     ``stage_costs`` (N,)) enough to explain why it was rejected, (m,) indices (empty: the
     failure is not local).
@@ -514,12 +514,14 @@ def _blamed_stages(st: Stages, trial: Trial, stage_costs: np.ndarray, expected: 
     Not blamed (the failure is not local, and one shorter step for every stage is the answer):
     more than ``_LOCAL_FRACTION`` of the stages (a cold start that crosses the thrust bound
     along much of the transfer: bounds kept from such a blame would shape the sweeps of every
-    later iteration), or a step whose whole expected decrease is below ``tol`` (DDP's tol_ddp)
-    relative to the cost (its gap is round-off, and a bound halved on round-off again and
-    again takes as many accepted steps to regrow, keeping DDP from its stopping test)."""
+    later iteration), or a step whose ``worth`` (default: its whole expected decrease) is below
+    ``tol`` (DDP's tol_ddp) relative to the cost (its gap is round-off, and a bound halved on
+    round-off again and again takes as many accepted steps to regrow, keeping DDP from its
+    stopping test)."""
     p = st.problem
     gap = expected - actual
-    if not (gap > 0 and math.isfinite(gap)) or expected < tol * abs(st.cost):
+    worth = expected if worth is None else worth
+    if not (gap > 0 and math.isfinite(gap)) or worth < tol * abs(st.cost):
         return np.empty(0, dtype=int)
     dz = trial.dz.T                                              # (N, n)
     change = stage_costs - st.l
@@ -563,20 +565,37 @@ def _line_search(st: Stages, gains: Gains, a0: float, dyn: bool, opts: SolverOpt
 
 
 def _trust_region_step(st: Stages, gains: Gains, dyn: bool, opts: SolverOptions,
-                       J: float) -> Trial | None:
+                       J: float, clamp: np.ndarray | None = None) -> Trial | Blame | None:
     """The full step of a trust-region sweep, accepted when its reduction ratio actual /
-    expected lies within tr_ratio_tol of 1 (the quadratic model held); None otherwise."""
-    trial = forward_pass(st, gains, 1.0, dyn)
+    expected lies within tr_ratio_tol of 1 (the quadratic model held). A rejected step whose
+    failure a few stages explain (``_blamed_stages``, with ``opts.stage_trust``) bounds those
+    stages (a ``Blame``, as the line search's first trial does), else None: the whole region
+    shrinks. Why: on the last fuel-optimal homotopy step of a MEO transfer (1199 stages,
+    delta = 1e-3) the ratios were either ~1 or -10 to -40 -- a step pushing a stage across its
+    thrust bound, whose penalty the model at the inactive side does not see -- and every such
+    rejection shrank the radius of all 1199 stages, so every DDP solve crawled through its 200
+    iterations at stage steps of 3e-4-7e-4."""
+    trial = forward_pass(st, gains, 1.0, dyn, clamp)
     if not trial.ok:
         return None
-    Jn = trial.cost = augmented_cost(st.problem, trial.X, trial.U, st.mult, st.hom)
+    stage_costs, terminal = augmented_cost_terms(st.problem, trial.X, trial.U, st.mult, st.hom)
+    Jn = trial.cost = float(np.sum(stage_costs) + terminal)
     tol = opts.tr_ratio_tol
     expected, actual = -(gains.dv1 + gains.dv2), J - Jn
     if _accepted(expected, actual, J, Jn, 1 - tol, 1 + tol):
         return trial
     # a step predicted to gain less than tol_ddp: the ratio is round-off, any decrease will do
     small = expected < opts.tol_ddp * abs(J)
-    return trial if small and actual >= 0 and math.isfinite(Jn) else None
+    if small and actual >= 0 and math.isfinite(Jn):
+        return trial
+    if opts.stage_trust and math.isfinite(Jn):
+        # the region, not the model, makes a trust-region step's expected decrease small: a
+        # gap worth DDP's stopping test is a model failure, not round-off
+        bad = _blamed_stages(st, trial, stage_costs, expected, actual, opts.tol_ddp,
+                             worth=expected - actual)
+        if bad.size:
+            return Blame(bad, 0.5 * np.linalg.norm(trial.dz[st.problem.nx:, bad], axis=0))
+    return None
 
 
 def _max_step(gains: Gains) -> float:
@@ -610,9 +629,10 @@ class _StepControl:
 
     def step(self, st: Stages, gains: Gains, J: float) -> Trial | Blame | None:
         if self.trust_region:
-            return _trust_region_step(st, gains, self.dyn, self.opts, J)
-        out = _line_search(st, gains, self.alpha if self.dyn else 1.0, self.dyn, self.opts, J,
-                           self.stage_radius)
+            out = _trust_region_step(st, gains, self.dyn, self.opts, J, self.stage_radius)
+        else:
+            out = _line_search(st, gains, self.alpha if self.dyn else 1.0, self.dyn, self.opts,
+                               J, self.stage_radius)
         if isinstance(out, Blame):
             if self.stage_radius is None:
                 self.stage_radius = np.full(st.problem.N, math.inf)
@@ -639,10 +659,10 @@ class _StepControl:
         if self.trust_region:   # eq. 37, growing (an unbounded region stays unbounded)
             self.radius *= 1.0 + self.opts.tr_kappa
             self.rho = _lower_rho(self.rho, self.opts)
-            return
-        self.rho = _rho_after_step(self.rho, trial.alpha, self.opts)
-        if self.dyn:
-            self.alpha = min(1.0, 2.0 * trial.alpha)
+        else:
+            self.rho = _rho_after_step(self.rho, trial.alpha, self.opts)
+            if self.dyn:
+                self.alpha = min(1.0, 2.0 * trial.alpha)
         if self.stage_radius is not None:
             # a stage whose bound held the accepted step back gets a larger one, as a trust
             # region that held grows (eq. 37); the others keep theirs

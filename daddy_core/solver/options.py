@@ -87,12 +87,13 @@ class SolverOptions:
             ``short_step_rho_growth`` (the reference: by rho_factor, which let DDP stall for
             hundreds of forward passes while rho crept up).
         globalization: ``Globalization`` (or its value): "line_search" or "trust_region".
-        stage_trust: the line search's trust region per stage: when its first trial fails
-            because the stage cost's own model failed at a few stages (``ddp._blamed_stages``),
-            those stages' control changes are bounded to half of what failed (the sweep's
-            per-stage radius and the forward pass's clamp) and the sweep runs again, instead
-            of one shorter step length for every stage; an accepted step that a bound held
-            back grows that bound by (1 + tr_kappa).
+        stage_trust: a trust region per stage: when the line search's first trial (or a
+            trust-region step) fails because the stage cost's own model failed at a few stages
+            (``ddp._blamed_stages``), those stages' control changes are bounded to half of
+            what failed (the sweep's per-stage radius and the forward pass's clamp) and the
+            sweep runs again, instead of one shorter step length (or a smaller region) for
+            every stage; an accepted step that a bound held back grows that bound by
+            (1 + tr_kappa).
         tr_fallback: with the line search, a DDP solve that runs into ddp_max_iter is solved
             again from its start with the trust region, which the rest of the solve keeps
             (``aul._trust_region_fallback``: why, and its ratio tolerance).
