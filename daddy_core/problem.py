@@ -336,7 +336,7 @@ class Problem:
     def violation(self, X: np.ndarray, U: np.ndarray) -> float:
         """Max violation over every path and terminal constraint of (X, U)."""
         g, ni, gt, nti = self.constraint_values(X, U)
-        return max(max_violation(g, ni), max_violation(gt, nti))
+        return largest(max_violation(g, ni), max_violation(gt, nti))
 
     def violation_report(self, X: np.ndarray, U: np.ndarray) -> list[dict]:
         """Every constraint's largest violation on (X, U), largest first: {"name" (e.g.
@@ -404,6 +404,12 @@ def violations(g, n_ineq: int) -> np.ndarray:
     v = np.abs(g)
     v[:n_ineq] = np.maximum(g[:n_ineq], 0.0)
     return v
+
+
+def largest(*values: float) -> float:
+    """The largest of some violations or residuals, NaN when any is NaN (Python's ``max``
+    returns or drops a NaN depending on its position: a NaN constraint read as met)."""
+    return float(np.max(values))
 
 
 def max_violation(g, n_ineq: int) -> float:

@@ -656,6 +656,29 @@ def test_a_cold_guess_newton_cannot_restore_falls_back_to_the_restored_ballistic
     assert any("start restored by Newton" in line for line in lines)   # it stalls ...
     assert not any("ballistic" in line for line in lines)              # ... and is not repeated
 
+def test_a_newton_step_that_leaves_the_dynamics_domain_is_halved_not_the_end():
+    """Newton's step from x = 4 towards sqrt(x_N) = 0.05 overshoots to x_N < 0, where the
+    terminal constraint is NaN (as an equinoctial orbit's sqrt(1 - p^2 - q^2) is past e = 1):
+    the step is halved until the residual is finite, and Newton converges."""
+    from daddy_core.da import functions as dm
+    from daddy_core.solver import newton
+    from daddy_core.solver.results import Status
+
+    prob = Problem(name="sqrt_target", nu=1, x0=np.array([4.0]), x_target=np.array([0.0025]),
+                   stage_dt=np.ones(5), step=lambda x, u, dt: dm.stack([x[0] + u[0] * dt]),
+                   stage_cost=lambda x, u, dt, hom: u[0] * u[0] * dt,
+                   terminal_cost=lambda x, xt: x[0] * 0.0,
+                   g_teq=lambda x, xt: dm.stack([dm.sqrt(x[0]) - 0.05]))
+    U = np.zeros((5, 1))
+    res = newton.restore(prob, prob.rollout(U), U, SolverOptions())
+    assert res.status is Status.NEWTON_CONVERGED, res.reason
+    assert abs(np.sqrt(res.X[-1, 0]) - 0.05) <= 1e-10
+    # a NaN constraint is never read as met (Python's max drops a NaN in second place)
+    U_past = np.full((5, 1), -1.0)
+    with np.errstate(invalid="ignore"):
+        assert np.isnan(prob.violation(prob.rollout(U_past), U_past))
+
+
 def test_a_newton_run_whose_residual_stays_put_has_stalled():
     """``newton._flat``: three outer iterations in a row that moved the exact residual by under
     1 % stop a run (the Earth-Mars restoration from the paper's guess sat at 35.16 for seven);

@@ -8,7 +8,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ..problem import max_violation
+from ..problem import largest, max_violation
 from . import newton
 from .ddp import DDPStats, Gains, Stages, ddp
 from .lagrangian import Multipliers
@@ -165,7 +165,7 @@ def aul(st: Stages, method: Method, opts: SolverOptions, stats: DDPStats,
         rho = res.rho if opts.carry_rho else rho0
         st = _without_drift(res.stages, opts, deadline) if method.dyn else res.stages
         g, ni, gt, nti = problem.constraint_values(st.X, st.U)
-        gmax = max(max_violation(g, ni), max_violation(gt, nti))
+        gmax = largest(max_violation(g, ni), max_violation(gt, nti))
         if progress is not None:
             progress(f"  AUL {it:2d}: DDP {res.iterations:3d} it ({res.reason}), "
                      f"cost {st.cost:.6e}, max violation {gmax:.2e}")

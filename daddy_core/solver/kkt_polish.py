@@ -41,7 +41,7 @@ import numpy as np
 
 from .. import da
 from ..errors import DaddyError
-from ..problem import Problem, max_violation
+from ..problem import Problem, largest, max_violation
 from .newton import (BandedSigma, ConstraintModel, NewtonResult, column_weights, newton,
                      stage_columns)
 from .optimality import Optimality, every_constraint, objective, optimality
@@ -185,7 +185,7 @@ def _exact_values(problem: Problem, X, U):
     stages = h if g is None else np.vstack([np.asarray(g, float), h])
     values = np.concatenate([stages.T.ravel(), np.zeros(0) if gt is None else
                              np.asarray(gt, float)])
-    violation = max(float(np.max(np.abs(h))), max_violation(g, ni), max_violation(gt, nti))
+    violation = largest(float(np.max(np.abs(h))), max_violation(g, ni), max_violation(gt, nti))
     return values, violation
 
 

@@ -31,7 +31,7 @@ import numpy as np
 
 from .. import da
 from ..errors import DaddyError
-from ..problem import Problem, max_violation
+from ..problem import Problem, largest, max_violation
 from .options import SolverOptions
 from .results import Status, StepResult, not_halved
 from .stage_maps import StageMaps, expand_dynamics
@@ -40,6 +40,8 @@ from .stage_maps import StageMaps, expand_dynamics
 # _FLAT_ITER outer iterations has stalled (``newton``; with newton_stall_iter > 0 only)
 _FLAT_ITER = 3
 _FLAT_TOL = 1e-2
+# a step whose iterate's exact residual is not finite is halved up to this many times
+_NAN_CUTS = 10
 
 
 def preload() -> None:
@@ -245,7 +247,7 @@ def _float_residual(problem: Problem, X, U, active_tol: float):
             c = np.asarray(c, dtype=float)
             active.append(float(np.max(np.abs(c[_active(c, n_ineq, active_tol)]), initial=0.0)))
             infeasible.append(max_violation(c, n_ineq))
-    return fx, max(active), max(infeasible)
+    return fx, largest(*active), largest(*infeasible)
 
 
 def exact_valued_maps(problem: Problem, maps: StageMaps | None, X, U, fx,
@@ -311,17 +313,28 @@ def newton(problem: Problem, X, U, opts: SolverOptions, deadline: float | None =
     current = []                      # the exact residual of each outer iteration's iterate
     status = Status.NEWTON_MAX_ITER
     prev_dmax, fresh = np.inf, True
+    last = None                       # (model, dY) of the last outer iteration's step
+    cuts = 0                          # halvings of that step so far
     while it < opts.newton_max_iter:
         if deadline is not None and time.perf_counter() > deadline:
             status = Status.TIME_BUDGET
             break
-        try:
-            fx, dmax, infeasibility = _float_residual(problem, X, U, opts.newton_active_tol)
+        try:   # (a NaN is handled below: numpy's warning would only be noise)
+            with np.errstate(invalid="ignore", over="ignore", divide="ignore"):
+                fx, dmax, infeasibility = _float_residual(problem, X, U, opts.newton_active_tol)
         except (DaddyError, ArithmeticError):   # incl. 1 / 0 on Python floats
             dmax = infeasibility = np.inf
         if not np.isfinite(dmax):
-            status = Status.NEWTON_NAN
-            break
+            # the step left the dynamics' domain (e.g. an orbit's eccentricity past 1 in
+            # equinoctial elements, where the model's polynomials are still finite): halve it
+            if last is None or cuts >= _NAN_CUTS:
+                status = Status.NEWTON_NAN
+                break
+            cuts += 1
+            last = (last[0], 0.5 * last[1])
+            X, U = last[0].apply(last[1])
+            continue
+        cuts = 0
         if best is None or dmax < best[0]:
             best = (dmax, X.copy(), U.copy(), infeasibility)
         history.append(best[0])
@@ -352,6 +365,7 @@ def newton(problem: Problem, X, U, opts: SolverOptions, deadline: float | None =
             status = Status.NEWTON_NO_DESCENT
             break
         maps = StageMaps.of(model.F, X, U, opts.eps_da)
+        last = (model, dY)
         X, U = model.apply(dY)
     if best is None:
         return NewtonResult(False, it, status, X0, U0, np.inf, False, maps)
