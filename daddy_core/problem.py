@@ -359,7 +359,8 @@ class Problem:
             for i, val in enumerate(violations(gt, nti)):
                 out.append(entry("g_tineq", i, float(val), None) if i < nti
                            else entry("g_teq", i - nti, float(val), None))
-        return sorted(out, key=lambda r: -r["violation"])
+        # (a NaN first: it is the worst, and sorting on a NaN key leaves the order undefined)
+        return sorted(out, key=lambda r: (not math.isnan(r["violation"]), -r["violation"]))
 
     def terminal_violation(self, x: np.ndarray) -> float:
         """Max violation of the terminal constraints at the final state x (nx,)."""

@@ -6,7 +6,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from daddy_core.problem import Problem
+from daddy_core.problem import Problem, largest
 from daddy_core.solver import Solution
 
 from .plan import SATURATION_SLACK
@@ -61,11 +61,11 @@ def assess(sol: Solution, problem: Problem, feasibility_tol: float) -> Assessmen
     if not np.all(np.isfinite(X)):
         return Assessment(False, False, "solution propagates to a non-finite state", U)
     g, ni = problem.path_constraints(X[:-1].T, U.T, problem.stage_dt)
-    if g is not None and ni and np.max(g[:ni]) > 1e-6:
+    if g is not None and ni and not np.max(g[:ni]) <= 1e-6:   # (NaN: violated)
         return Assessment(False, False,
                           f"solution violates a path constraint by {np.max(g[:ni]):.2e}", U)
-    miss = max(problem.terminal_violation(X[-1]), repro)
-    if miss > feasibility_tol:
+    miss = largest(problem.terminal_violation(X[-1]), repro)
+    if not miss <= feasibility_tol:
         return Assessment(True, False, f"terminal constraint missed by {miss:.2e} (normalised)",
                           U, X, miss)
     return Assessment(True, True, "", U, X, miss)

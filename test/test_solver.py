@@ -677,6 +677,7 @@ def test_a_newton_step_that_leaves_the_dynamics_domain_is_halved_not_the_end():
     U_past = np.full((5, 1), -1.0)
     with np.errstate(invalid="ignore"):
         assert np.isnan(prob.violation(prob.rollout(U_past), U_past))
+        assert np.isnan(prob.violation_report(prob.rollout(U_past), U_past)[0]["violation"])
 
 
 def test_a_newton_run_whose_residual_stays_put_has_stalled():

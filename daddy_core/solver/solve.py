@@ -14,7 +14,7 @@ import numpy as np
 
 from ..errors import DaddyError
 from ..integrators import dop853, dop853_batch
-from ..problem import Problem
+from ..problem import Problem, largest
 from . import newton
 from .ddp import DDPStats
 from .homotopy import HomotopyResult, continuation, homotopy_steps
@@ -328,7 +328,7 @@ def _assemble(problem: Problem, end: _End, hres: HomotopyResult, steps: tuple, m
     timings, and what a warm start needs."""
     X, U, converged, reason = end.X, end.U, end.converged, end.reason
     violations = problem.violation_report(X, U)   # one evaluation of the constraints
-    gmax = max((r["violation"] for r in violations), default=0.0)
+    gmax = largest(0.0, *(r["violation"] for r in violations))
     if not polish and gmax > opts.tol_aul:
         converged = False
     units, m_idx = problem.units, problem.mass_index
