@@ -236,13 +236,14 @@ def _restore_ballistic(problem: Problem, X, U0, stalled: newton.NewtonResult,
                        progress) -> newton.NewtonResult | None:
     """A cold guess (X, U0) that Newton could not restore: Newton's restoration of the
     ballistic trajectory (zero control) instead, which DDP starts from if it converged (else
-    DDP starts from the guess); None when skipped. Why: a random guess that thrusts into a region where the
-    constraint model is poor (on DRO->DRO, a lunar flyby) stalls the restoration and then takes
-    DDP's first augmented-Lagrangian solves through the same region, where they crawl to the
-    time budget; the ballistic trajectory stays near the departure orbit, and its restoration
-    converged on every such guess measured (DRO->DRO, halo). Skipped when the guess flies the
-    ballistic trajectory already (the default 1e-6 guess), where it would only repeat the
-    stall."""
+    DDP starts from the guess); None when skipped.
+
+    Why: a random guess that thrusts into a region where the constraint model is poor (on
+    DRO->DRO, a lunar flyby) stalls the restoration and then takes DDP's first
+    augmented-Lagrangian solves through the same region, where they crawl to the time budget;
+    the ballistic trajectory stays near the departure orbit, and its restoration converged on
+    every such guess measured (DRO->DRO, halo). Skipped when the guess flies the ballistic
+    trajectory already (the default 1e-6 guess), where it would only repeat the stall."""
     Ub = np.zeros_like(U0)
     Xb = problem.rollout(Ub)
     if (not np.all(np.isfinite(Xb))
@@ -329,7 +330,7 @@ def _assemble(problem: Problem, end: _End, hres: HomotopyResult, steps: tuple, m
     X, U, converged, reason = end.X, end.U, end.converged, end.reason
     violations = problem.violation_report(X, U)   # one evaluation of the constraints
     gmax = largest(0.0, *(r["violation"] for r in violations))
-    if not polish and gmax > opts.tol_aul:
+    if not polish and not gmax <= opts.tol_aul:   # (NaN: not converged)
         converged = False
     units, m_idx = problem.units, problem.mass_index
     N, nu, nx = problem.N, problem.nu, problem.nx
