@@ -356,12 +356,20 @@ def newton(problem: Problem, X, U, opts: SolverOptions, deadline: float | None =
         if sigma is None:
             status = Status.NEWTON_SINGULAR
             break
-        dY, inner = _inner_iterations(model, sigma, dmax, opts)
+        dY, inner, model_max = _inner_iterations(model, sigma, dmax, opts)
         it += 1
         if inner == 0:
             if not fresh:   # re-centred derivatives gave no descent: expand afresh
                 maps, prev_dmax, fresh = None, np.inf, True
                 continue
+            status = Status.NEWTON_NO_DESCENT
+            break
+        if (opts.newton_stall_iter > 0 and fresh and dmax > best[0]
+                and model_max > (1.0 - _FLAT_TOL) * dmax):
+            # thrown above its best residual, a fresh model that Newton cannot take down by 1 %
+            # has no way back (Earth-Mars and Lyapunov from the paper's guess: 35.16 and 128
+            # after a step the model misjudged, models reducing them by < 0.01 %; every
+            # converging restoration measured reduced such a model by >= 10 %)
             status = Status.NEWTON_NO_DESCENT
             break
         maps = StageMaps.of(model.F, X, U, opts.eps_da)
@@ -389,7 +397,8 @@ def _inner_iterations(model: ConstraintModel, sigma: BandedSigma, dmax: float,
                       opts: SolverOptions):
     """Alg. 11's inner loop: Newton steps on the polynomial model, re-using the factorisation,
     each backtracked until it reduces the model's max residual, while the model converges at a
-    rate r = log d*_max / log d_max above eps_CV. Returns (dY, number of steps taken)."""
+    rate r = log d*_max / log d_max above eps_CV. Returns (dY, number of steps taken, the
+    model's max residual at dY)."""
     d = model.residual()
     dY = np.zeros(model.D.shape[1])
     r = np.inf
@@ -413,4 +422,4 @@ def _inner_iterations(model: ConstraintModel, sigma: BandedSigma, dmax: float,
         r = np.log(new_max) / np.log(dmax) if 0 < dmax < 1 and new_max > 0 else np.inf
         dmax = new_max
         inner += 1
-    return dY, inner
+    return dY, inner, dmax
