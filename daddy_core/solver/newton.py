@@ -305,8 +305,12 @@ def newton(problem: Problem, X, U, opts: SolverOptions, deadline: float | None =
     step stayed inside their convergence radius (paper eq. 11, as in the Dyn forward pass) and
     re-expanded elsewhere. Newton on these derivatives converges at a rate set by their
     truncation error; an outer iteration that does not reduce the exact residual makes the next
-    one expand every stage afresh. Converged: the returned (best) iterate meets every
-    constraint to tol_newton, whether or not each near-active inequality reached its bound.
+    one expand every stage afresh. A step whose iterate is not finite (it left the dynamics'
+    domain) is halved. Stalls end the run early (with newton_stall_iter > 0): a best residual
+    that did not halve over newton_stall_iter iterations, an exact residual that stays put
+    (``_flat``), a fresh model above the best residual that cannot be taken down by 1 %.
+    Converged: the returned (best) iterate meets every constraint to tol_newton, whether or
+    not each near-active inequality reached its bound.
     """
     X0, U0 = X.copy(), U.copy()
     it, best, history = 0, None, []   # history: the best residual after each outer iteration
