@@ -727,6 +727,7 @@ def test_a_feasible_iterate_whose_ddp_solve_ran_into_its_bound_gets_one_more_sol
     assert not _ends_feasible(bound, feasible, False, opts)
     assert _ends_feasible(bound, feasible, True, opts)
     assert not _ends_feasible(bound, infeasible, True, opts)
+    assert not _ends_feasible(done, float("nan"), False, opts)   # a NaN is never feasible
 
 
 def test_globalization_is_validated():

@@ -131,7 +131,7 @@ def _ends_feasible(res, gmax: float, after_cut_off: bool, opts: SolverOptions) -
     on a fuel-optimal MEO->MEO transfer every trust-region DDP solve of the last step runs into
     its bound; continuing until the multiplier test stopped the loop took 12 AUL iterations and
     340 s instead of 141 for the same 925.207 kg, still unconverged after the KKT polishing."""
-    if gmax > opts.tol_aul:
+    if not gmax <= opts.tol_aul:   # (NaN: not feasible, as Alg. 4's test before this one)
         return False
     return res.status is not Status.DDP_MAX_ITER or after_cut_off
 
