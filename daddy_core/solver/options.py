@@ -121,8 +121,10 @@ class SolverOptions:
             backtracking of an inner step (it must reduce the model's max residual).
         newton_stall_iter: stop (``Status.NEWTON_STALLED``) when the best residual did not
             halve over this many outer iterations, or the residual stopped moving
-            (``newton._flat``; 0: neither): each outer iteration converges its model at a Newton
-            rate, so a run this slow is one that will not converge.
+            (``newton._flat``), and (``Status.NEWTON_NO_DESCENT``) when a fresh model above the
+            best residual cannot be taken down by 1 % (0: none of these): each outer iteration
+            converges its model at a Newton rate, so a run this slow is one that will not
+            converge.
         newton_cv_ratio: the convergence-rate threshold (eps_CV, paper Alg. 5).
         newton_active_tol: an inequality with g > -tol is treated as active.
         newton_regularisation: diagonal added to Delta Delta^T if it is not positive definite.
@@ -139,19 +141,18 @@ class SolverOptions:
             with Newton (``newton.restore``); when Newton does not get there from a cold
             guess that thrusts, it restores the ballistic trajectory (zero control) instead;
             when that stalls too (e.g. Earth-Mars: the ballistic flight is far from Mars), DDP
-            starts from the guess itself. If
-            DDP does not converge (e.g. the time budget), the solve returns the restored
-            feasible iterate (converged=False, with the reason). Why it is the default, for cold
-            starts too: the augmented Lagrangian starts with a penalty of mu_init, under which
-            DDP's first solve from a random guess trades the thrust bound for the terminal miss:
-            on DRO->DRO its iterates took the thrust to 3 u_max and the trajectory to a lunar
-            flyby at 4,400 km, where the line search crawled at steps of 1e-4 until the time
-            budget ran out; from the restored guess the energy step starts feasible and stays
+            starts from the guess itself. If DDP does not converge (e.g. the time budget), the
+            solve returns the restored feasible iterate (converged=False, with the reason).
+            Why it is the default, for cold starts too: the augmented Lagrangian starts with a
+            penalty of mu_init, under which DDP's first solve from a random guess trades the
+            thrust bound for the terminal miss: on DRO->DRO its iterates took the thrust to
+            3 u_max and the trajectory to a lunar flyby at 4,400 km, where the line search
+            crawled at steps of 1e-4 until the time budget ran out; from the restored guess the energy step starts feasible and stays
             near it (robustness harness, random guesses: DRO->DRO 91 -> 96 of 100, halo 18 -> 21
             of 30, Earth-Mars 100 of 100 either way; with the ballistic fallback DRO 100 of 100,
-            halo 28 of 30). From the paper's near-zero guess the
-            restoration converges on the CR3BP transfers (same optima) and stalls on Earth-Mars
-            (the guess is used as before).
+            halo 28 of 30). From the paper's near-zero guess the restoration converges on the
+            halo and DRO transfers (same optima) and stalls on Earth-Mars, Lyapunov and
+            NRHO->DRO (the guess is used as before).
         map_reach: Newton and the restoration's rollout re-centre stage maps up to this many
             times their convergence radius (eps_da): Newton's residuals are exact, so
             derivatives a little less accurate only slow its convergence, and an outer

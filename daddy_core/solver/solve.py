@@ -205,7 +205,7 @@ def _warm_start(problem: Problem, U0, warm: WarmStart, opts: SolverOptions, cloc
         res = newton.restore(problem, X, U0, opts, clock.deadline, maps=maps)
         start.restore_iterations = res.iterations
         if not res.converged and maps is None and warm.duals is None:   # a cold start
-            ballistic = _restore_ballistic(problem, X, U0, res, opts, clock, progress)
+            ballistic = _restore_ballistic(problem, X, U0, res, opts, clock.deadline, progress)
             if ballistic is not None:
                 start.restore_iterations += ballistic.iterations
                 res = ballistic if ballistic.converged else res
@@ -232,7 +232,7 @@ _SAME_START_RTOL = 1e-2
 
 
 def _restore_ballistic(problem: Problem, X, U0, stalled: newton.NewtonResult,
-                       opts: SolverOptions, clock: _Clock,
+                       opts: SolverOptions, deadline: float | None,
                        progress) -> newton.NewtonResult | None:
     """A cold guess (X, U0) that Newton could not restore: Newton's restoration of the
     ballistic trajectory (zero control) instead, which DDP starts from if it converged (else
@@ -249,7 +249,7 @@ def _restore_ballistic(problem: Problem, X, U0, stalled: newton.NewtonResult,
     if (not np.all(np.isfinite(Xb))
             or np.max(np.abs(Xb - X)) <= _SAME_START_RTOL * np.max(np.abs(X))):
         return None
-    res = newton.restore(problem, Xb, Ub, opts, clock.deadline)
+    res = newton.restore(problem, Xb, Ub, opts, deadline)
     if progress:
         progress(f"guess not restored ({stalled.reason}); ballistic start: {res.iterations} "
                  f"iterations, max violation {res.max_violation:.2e} ({res.reason})")
