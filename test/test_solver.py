@@ -698,6 +698,80 @@ def test_a_restoration_thrown_where_a_fresh_model_cannot_descend_stops_there():
             assert res.status is Status.NEWTON_NO_DESCENT and res.iterations <= 3, res.reason
 
 
+class _CountedModel:
+    """A constraint model that counts its evaluations."""
+
+    def __init__(self, model):
+        self.model, self.calls = model, 0
+
+    def residual(self, dY):
+        self.calls += 1
+        return self.model.residual(dY)
+
+
+def test_newtons_backtracking_picks_the_step_a_trial_by_trial_search_picks():
+    """``newton._backtrack`` reads every trial's model residual off the quadratic through
+    alpha = 1, -1 (the model is a polynomial of degree 2): with at most three evaluations of
+    the model it must choose the alpha, and return the residual, that evaluating the trials one
+    by one (the search before it) gives -- here on
+    the stalled Earth-Mars restoration's models, whose steps are cut 10-20 times, and a random
+    DRO guess's, whose first steps are cut up to 17 times."""
+    from daddy_core.solver import newton
+
+    def one_by_one(model, dY, step, dmax, opts):
+        alpha = 1.0
+        for _ in range(opts.newton_ls_max_halvings):
+            cand = model.residual(dY + alpha * step)
+            if np.max(np.abs(cand)) < dmax:
+                return alpha, cand
+            alpha *= opts.newton_ls_shrink
+        return None
+
+    rng = np.random.default_rng(3)
+    cut = 0
+    for name in ("earth_mars", "dro_dro"):
+        case = load_case(name)
+        prob, opts = problem_from_case(case), case_options(case, True)
+        U = float(case.units.thrust(1e-6)) + 0.3 * prob.u_max * rng.uniform(-1, 1, (prob.N, 3))
+        X = prob.rollout(U)
+        model = newton.ConstraintModel(prob, X, U, opts.newton_active_tol)
+        sigma = newton._factorise(model, newton.column_weights(
+            prob, U, opts.newton_control_weight_floor), opts.newton_regularisation)
+        dY, d = np.zeros(model.D.shape[1]), model.residual()
+        for _ in range(6):   # the inner iterations' first steps, as _inner_iterations takes them
+            dmax, step = float(np.max(np.abs(d))), sigma.step(d)
+            want = one_by_one(model, dY, step, dmax, opts)
+            counted = _CountedModel(model)
+            got = newton._backtrack(counted, dY, step, d, dmax, opts)
+            if want is None:
+                assert got is None
+                break
+            assert got[0] == want[0] and np.array_equal(got[1], want[1]), (name, got[0], want[0])
+            assert counted.calls <= 3, (name, want[0], counted.calls)   # alpha = 1, -1, chosen
+            cut += want[0] < 1.0
+            dY, d = dY + want[0] * step, want[1]
+    assert cut >= 2   # (the quadratic was used, not only the full step)
+
+
+def test_ddp_starts_a_stalled_restorations_guess_from_its_first_expansion():
+    """A cold restoration that stalls leaves DDP at the guess, where its first model expanded
+    every stage afresh: ``NewtonResult.start_F`` hands those maps on, identical to the
+    expansion DDP would make (Earth-Mars from the paper's guess: one expansion of 40 stages
+    saved); a restoration given maps (a warm start) has none to hand on."""
+    from daddy_core.solver import newton
+    from daddy_core.solver.stage_maps import StageMaps, expand_dynamics
+
+    case = load_case("earth_mars")
+    prob, opts = problem_from_case(case), case_options(case, False)
+    U = np.full((prob.N, prob.nu), float(case.units.thrust(1e-6)))
+    X = prob.rollout(U)
+    res = newton.restore(prob, X, U, opts)
+    assert not res.converged
+    assert np.array_equal(res.start_F.c, expand_dynamics(prob, X[:-1], U).c)
+    warm = newton.restore(prob, X, U, opts, maps=StageMaps.of(res.start_F, X, U, opts.eps_da))
+    assert warm.start_F is None
+
+
 def test_a_newton_run_whose_residual_stays_put_has_stalled():
     """``newton._flat``: three outer iterations in a row that moved the exact residual by under
     1 % stop a run (the Earth-Mars restoration from the paper's guess sat at 35.16 for seven);

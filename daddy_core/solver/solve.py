@@ -218,6 +218,8 @@ def _warm_start(problem: Problem, U0, warm: WarmStart, opts: SolverOptions, cloc
                                                    opts.map_reach)
         elif maps is not None and reach > 1:
             start.X = maps.rollout(problem, U0)[0]   # DDP starts from a consistent trajectory
+        else:   # DDP starts from the guess, where Newton's first model expanded the stages
+            start.F = res.start_F
         if progress:
             progress(f"start restored by Newton: {res.iterations} iterations, max violation"
                      f" {res.max_violation:.2e} ({res.reason})")
