@@ -112,6 +112,22 @@ def test_a_leo_raise_solves_and_its_outputs_match_a_cartesian_propagation(tmp_pa
                                rtol=1e-11, atol=1e-12)
 
 
+@pytest.mark.parametrize("tof_days", [1.0, 2.0])
+def test_a_solution_lends_a_warm_start_the_multipliers_of_its_kkt_point(tof_days):
+    """``Solution.duals`` are the KKT multipliers of the solution (``solve._duals``): solving the
+    same problem again from it, the augmented Lagrangian starts at the optimum's multipliers and
+    needs one DDP solve of one iteration. With the multipliers the cold solve's AUL ended with
+    (0-0.5 where the KKT ones are ~112 at the terminal constraints) it took 2-5 AUL solves, and
+    on the 1-day raise ended unconverged."""
+    case = _raise_case(tof_days=tof_days)
+    prob, sol = _solve(case)
+    assert sol.converged, sol.reason
+    again = solve(prob, sol, options=case_options(case, False).with_(mu_init=1e3, ddp_min_iter=1))
+    assert again.converged, again.reason
+    assert again.iterations["aul"] == 1 and again.iterations["ddp"] == 1, again.iterations
+    assert again.cost == pytest.approx(sol.cost, rel=1e-5)
+
+
 def test_a_leo_raise_with_j2_solves_and_matches_a_cartesian_propagation_with_j2():
     """The same raise with the Earth's J2: the node regresses ~5 deg in the day, so the target
     RAAN is 140 deg (145 deg without J2 would need a plane change); it solves from the cold

@@ -377,4 +377,33 @@ def _assemble(problem: Problem, end: _End, hres: HomotopyResult, steps: tuple, m
                    "optimality": t["optimality"], "kkt": t.get("kkt", 0.0)},
         history=hres.history, units=units.as_dict(), polynomial_share=stats.polynomial_share,
         violations=violations,
-        duals=hres.mult.as_duals(), rho=float(hres.rho), stage_maps=end.maps)
+        duals=_duals(problem, X, U, opt, hres, opts), rho=float(hres.rho), stage_maps=end.maps)
+
+
+def _duals(problem: Problem, X, U, opt: Optimality | None, hres: HomotopyResult,
+           opts: SolverOptions) -> dict:
+    """The multipliers a warm start from this solution takes: the least-squares KKT
+    multipliers of the returned (X, U) (``optimality``) when they were evaluated, else those
+    the last AUL solve ran with.
+
+    Why: an AUL whose penalty grows ends with multipliers that lag the problem's by the
+    penalty's share mu g, and one that starts from a Newton-restored feasible trajectory can
+    meet tol_aul with them still at zero: a LEO plan's terminal multipliers were 0 where
+    the KKT ones are -106, 281, -197, ..., and each of its warm re-plans spent two more AUL
+    solves (of three) learning them. An inequality inactive at (X, U) (below -newton_active_tol)
+    gets 0, as complementarity wants (the least-squares ones are only small there, and the
+    augmented cost of eq. 8 turns a positive multiplier into a penalty on the whole stage)."""
+    if opt is None:
+        return hres.mult.as_duals()
+    g, ni, gt, nti = problem.constraint_values(X, U)
+    nc, nt = (0 if g is None else g.shape[0]), (0 if gt is None else gt.shape[0])
+    mu = opt.multipliers
+    if mu.size != problem.N * (nc + problem.nx) + nt or not np.all(np.isfinite(mu)):
+        return hres.mult.as_duals()
+    lam = mu[:mu.size - nt].reshape(problem.N, nc + problem.nx)[:, :nc].T.copy()   # (n_c, N)
+    lam_t = mu[mu.size - nt:].copy()
+    if nc:
+        lam[:ni][g[:ni] < -opts.newton_active_tol] = 0.0
+    if nt:
+        lam_t[:nti][gt[:nti] < -opts.newton_active_tol] = 0.0
+    return {"lam": lam.tolist(), "lam_t": lam_t.tolist()}
