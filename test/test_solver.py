@@ -753,6 +753,20 @@ def test_newtons_backtracking_picks_the_step_a_trial_by_trial_search_picks():
     assert cut >= 2   # (the quadratic was used, not only the full step)
 
 
+def test_each_homotopy_step_starts_from_the_multipliers_estimated_at_the_last_solution():
+    """``continuation`` hands the next homotopy step eq. 9's update at the previous step's
+    solution (lam + mu g), not the multipliers its last DDP solve ran with, which lag by
+    mu g: the halo's last step (h = 0.999) then meets tol_aul after at most 3 AUL solves
+    (7 before), at the same optimum."""
+    case = load_case("halo_l2_l1")
+    prob = problem_from_case(case)
+    sol = solve(prob, np.full((prob.N, 3), float(case.units.thrust(1e-6))), fuel_optimal=True,
+                options=case_options(case, True))
+    assert sol.converged, sol.reason
+    assert sol.history[-1]["aul_iterations"] <= 3, [h["aul_iterations"] for h in sol.history]
+    assert sol.final_mass_kg == pytest.approx(973.941, abs=2e-3)
+
+
 def test_ddp_starts_a_stalled_restorations_guess_from_its_first_expansion():
     """A cold restoration that stalls leaves DDP at the guess, where its first model expanded
     every stage afresh: ``NewtonResult.start_F`` hands those maps on, identical to the
