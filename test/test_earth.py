@@ -116,9 +116,9 @@ def test_a_leo_raise_solves_and_its_outputs_match_a_cartesian_propagation(tmp_pa
 def test_a_solution_lends_a_warm_start_the_multipliers_of_its_kkt_point(tof_days):
     """``Solution.duals`` are the KKT multipliers of the solution (``solve._duals``): solving the
     same problem again from it, the augmented Lagrangian starts at the optimum's multipliers and
-    needs one DDP solve of one iteration. With the multipliers the cold solve's AUL ended with
-    (0-0.5 where the KKT ones are ~112 at the terminal constraints) it took 2-5 AUL solves, and
-    on the 1-day raise ended unconverged."""
+    needs one DDP solve of one iteration. With the multipliers the cold solve's last AUL solve
+    ran with (they lag the optimum's by mu g) it took 2-5 AUL solves, and on the 1-day raise
+    ended unconverged."""
     case = _raise_case(tof_days=tof_days)
     prob, sol = _solve(case)
     assert sol.converged, sol.reason

@@ -713,9 +713,8 @@ def test_newtons_backtracking_picks_the_step_a_trial_by_trial_search_picks():
     """``newton._backtrack`` reads every trial's model residual off the quadratic through
     alpha = 1, -1 (the model is a polynomial of degree 2): with at most three evaluations of
     the model it must choose the alpha, and return the residual, that evaluating the trials one
-    by one (the search before it) gives -- here on
-    the stalled Earth-Mars restoration's models, whose steps are cut 10-20 times, and a random
-    DRO guess's, whose first steps are cut up to 17 times."""
+    by one (the search before it) gives -- on Earth-Mars and DRO models at random guesses
+    whose first steps are cut several times."""
     from daddy_core.solver import newton
 
     def one_by_one(model, dY, step, dmax, opts):
