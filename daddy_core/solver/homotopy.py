@@ -88,9 +88,7 @@ def continuation(problem: Problem, X, U, steps: tuple, method: Method, opts: Sol
     at mu_init and the multipliers of eq. 9's update there (lam + mu g: the first-order
     estimate at that solution), not those its last DDP solve ran with: an AUL that met tol_aul
     as mu grew ends with multipliers that lag by mu g, and with mu reset the next step's first
-    DDP solve traded the constraints away on them. Measured: the halo's last step 7 -> 2 AUL
-    solves, the Lyapunov transfer 30.8 -> 17.7 s, NRHO->DRO converged (976.14 kg) where it
-    had run into the budget unconverged; Earth-Mars unchanged."""
+    DDP solve traded the constraints away on them (README status: what it changed)."""
     mult = Multipliers.initial(problem, opts.mu_init)
     mult.take_duals(duals)
     best, gains, history, aul_iterations = (X, U), None, [], 0
