@@ -446,8 +446,8 @@ def _backtrack(model: ConstraintModel, dY: np.ndarray, step: np.ndarray, d: np.n
         return 1.0, ahead
     alphas = opts.newton_ls_shrink ** np.arange(1, opts.newton_ls_max_halvings)
     back = model.residual(dY - step)
-    r1, r2 = 0.5 * (ahead - back), 0.5 * (ahead + back) - d
-    with np.errstate(invalid="ignore", over="ignore"):
+    with np.errstate(invalid="ignore", over="ignore"):   # (a non-finite quadratic: below)
+        r1, r2 = 0.5 * (ahead - back), 0.5 * (ahead + back) - d
         line = np.max(np.abs(d + alphas[:, None] * (r1 + alphas[:, None] * r2)), axis=1)
     if not np.all(np.isfinite(r1 + r2)):
         line = np.zeros_like(alphas)   # (no usable quadratic: try every step directly)

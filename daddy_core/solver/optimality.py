@@ -56,6 +56,16 @@ class Optimality:
     def kkt_residual(self) -> float:
         return max(self.stationarity, self.complementarity)
 
+    def constraint_multipliers(self, N: int, nx: int, n_path: int, n_terminal: int):
+        """The multipliers of the problem's own constraints, path (n_path, N) and terminal
+        (n_terminal,), read from the rows of ``every_constraint``'s model -- [g_k, h_k] for
+        each stage, then g_N, every row present -- without the stage defects' (the costates);
+        None when the multipliers do not have that many rows."""
+        mu, rows = self.multipliers, N * (n_path + nx)
+        if mu.size != rows + n_terminal:
+            return None
+        return mu[:rows].reshape(N, n_path + nx)[:, :n_path].T.copy(), mu[rows:].copy()
+
 
 def objective(problem: Problem, X, U, hom) -> float:
     """The problem's own cost sum l + phi (no augmented-Lagrangian terms)."""

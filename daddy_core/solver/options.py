@@ -147,10 +147,10 @@ class SolverOptions:
             penalty of mu_init, under which DDP's first solve from a random guess trades the
             thrust bound for the terminal miss: on DRO->DRO its iterates took the thrust to
             3 u_max and the trajectory to a lunar flyby at 4,400 km, where the line search
-            crawled at steps of 1e-4 until the time budget ran out; from the restored guess the energy step starts feasible and stays
-            near it (robustness harness, random guesses: DRO->DRO 91 -> 96 of 100, halo 18 -> 21
-            of 30, Earth-Mars 100 of 100 either way; with the ballistic fallback DRO 100 of 100,
-            halo 28 of 30). From the paper's near-zero guess the restoration converges on the
+            crawled at steps of 1e-4 until the time budget ran out; from the restored guess
+            the energy step starts feasible and stays near it (robustness harness, random
+            guesses: DRO->DRO 91 -> 96 of 100, halo 18 -> 21 of 30, Earth-Mars 100 of 100
+            either way; with the ballistic fallback DRO 100 of 100, halo 28 of 30). From the paper's near-zero guess the restoration converges on the
             halo and DRO transfers (same optima) and stalls on Earth-Mars, Lyapunov and
             NRHO->DRO (the guess is used as before).
         map_reach: Newton and the restoration's rollout re-centre stage maps up to this many

@@ -397,11 +397,10 @@ def _duals(problem: Problem, X, U, opt: Optimality | None, hres: HomotopyResult,
         return hres.mult.as_duals()
     g, ni, gt, nti = problem.constraint_values(X, U)
     nc, nt = (0 if g is None else g.shape[0]), (0 if gt is None else gt.shape[0])
-    mu = opt.multipliers   # in the rows of every_constraint's model: [g_k, h_k] by stage, g_N
-    if mu.size != problem.N * (nc + problem.nx) + nt or not np.all(np.isfinite(mu)):
+    split = opt.constraint_multipliers(problem.N, problem.nx, nc, nt)
+    if split is None or not np.all(np.isfinite(opt.multipliers)):
         return hres.mult.as_duals()
-    lam = mu[:mu.size - nt].reshape(problem.N, nc + problem.nx)[:, :nc].T.copy()   # (n_c, N)
-    lam_t = mu[mu.size - nt:].copy()
+    lam, lam_t = split
     if nc:
         lam[:ni][g[:ni] < -opts.newton_active_tol] = 0.0
     if nt:
