@@ -72,11 +72,36 @@ def test_a_solve_that_cannot_reach_tol_optimality_says_so_and_keeps_its_best_ite
     u0 = np.full((prob.N, 3), float(case.units.thrust(case.solver["u_guess_n"])))
     ddp = solve(prob, u0, options=case_options(case, False, tol_optimality=np.inf))
     sol = solve(prob, u0, options=case_options(case, False, tol_optimality=1e-14,
-                                               kkt_max_iter=1))
+                                               kkt_max_iter=1, kkt_resolves=0))
     assert not sol.converged and "KKT residual" in sol.reason and "kkt_max_iter" in sol.reason
     assert sol.max_violation <= 1e-10 and np.all(np.isfinite(sol.U))
     assert sol.cost <= ddp.cost and sol.iterations["kkt"] == 1
     assert 1e-14 < sol.kkt_residual < 1e-4
+
+
+@pytest.mark.parametrize("fuel", [False, True])
+def test_a_stalled_kkt_polishing_hands_the_last_homotopy_step_back_to_ddp(fuel):
+    """Earth-Mars with the KKT polishing switched off (kkt_max_iter=0: it stalls at once, as
+    it does where its Newton steps creep): each re-solve of the last homotopy step from the
+    polished iterate with its KKT multipliers lowers the KKT residual (energy: 1e-2 -> 7e-4 ->
+    1e-4 measured), one re-solve takes the fuel-optimal solve to tol_optimality, every end is
+    feasible, and the re-solves' AUL iterations are counted and marked in the history."""
+    case = load_case("earth_mars")
+    prob = problem_from_case(case)
+    runs = {n: solve(prob, None, fuel_optimal=fuel, options=case_options(
+        case, fuel, kkt_max_iter=0, kkt_resolves=n)) for n in (0, 1, 3)}
+    for n, sol in runs.items():
+        assert sol.max_violation <= 1e-10 and np.all(np.isfinite(sol.U))
+        assert sum(bool(h.get("resolve")) for h in sol.history) == (0 if n == 0 else
+                                                                    len(sol.history) - (4 if fuel else 1))
+    assert not runs[0].converged and runs[0].kkt_residual > 1e-4
+    assert runs[1].kkt_residual < runs[0].kkt_residual
+    assert runs[3].kkt_residual <= runs[1].kkt_residual
+    assert runs[1].iterations["aul"] > runs[0].iterations["aul"]
+    if fuel:
+        assert runs[1].converged and runs[1].final_mass_kg == pytest.approx(603.465, abs=1e-3)
+    else:
+        assert runs[3].kkt_residual < 0.1 * runs[0].kkt_residual
 
 
 def test_the_residual_round_trips_and_older_solutions_load():

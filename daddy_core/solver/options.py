@@ -176,6 +176,10 @@ class SolverOptions:
             iterations on the step's own Jacobian first (each one float integration), then
             Newton with at most kkt_restore_iter iterations (a step needing more left the
             region where the linearisation holds: a larger shift is cheaper).
+        kkt_resolves: when the KKT polishing ends above tol_optimality, the last homotopy step
+            is solved again (AUL + DDP, then both polishings) from the polished iterate with
+            its KKT multipliers, at most this many times, and kept when it ends with a smaller
+            KKT residual (``solve``: why).
     Run:
         time_budget_s: wall-clock budget for the whole solve (None: unbounded).
         verbose: print progress lines (homotopy step, AUL iteration, violation, cost).
@@ -228,6 +232,7 @@ class SolverOptions:
     kkt_cost_slack: float = 5.0
     kkt_chord_iter: int = 6
     kkt_restore_iter: int = 4
+    kkt_resolves: int = 1
     time_budget_s: float | None = None
     verbose: bool = False
 
