@@ -206,6 +206,38 @@ def test_weighted_newton_steps_keep_coasting_arcs_and_converge_in_one_iteration(
     assert column_weights(problem_from_case(DI), np.ones((11, 3)), 1e-2) is None
 
 
+@pytest.mark.parametrize("km, corrected", [(1e3, False), (3e6, True)])
+def test_newton_corrects_a_step_that_its_second_order_term_undoes(km, corrected):
+    """Earth-Mars nominal plan from a start km off: the Newton step meets the model's
+    linearisation, and what is left at the full step is the model's second-order term. 1000 km
+    off that term is 1e-3 of the residual and the step is kept as it is; 3e6 km off it exceeds
+    the residual itself, and the second-order correction on the same factorisation takes the
+    full step below it (measured: 0.535 -> 1.07 uncorrected, 0.296 corrected)."""
+    from daddy_core.solver.newton import BandedSigma, ConstraintModel, _corrected, column_weights
+    case = load_case("earth_mars")
+    prob = problem_from_case(case)
+    plan = Solution.from_json(pathlib.Path(__file__).parents[1] / "daddy_ros" / "plans"
+                              / "earth_mars_fuel.json")
+    u = case.units
+    moved = prob.with_x0(plan.X[0] + np.r_[u.length([0.6 * km, -0.8 * km, 0.0]),
+                                           u.speed([6e-4 * km, 8e-4 * km, 0.0]), 0.0])
+    X0 = prob.rollout(plan.U, x0=moved.x0)
+    opts = case_options(case, True)
+    model = ConstraintModel(moved, X0, plan.U, opts.newton_active_tol)
+    sigma = BandedSigma(model.D, opts.newton_regularisation,
+                        column_weights(moved, plan.U, opts.newton_control_weight_floor))
+    d = model.residual()
+    dmax = np.max(np.abs(d))
+    step = sigma.step(d)
+    full = np.max(np.abs(model.residual(step)))
+    chosen = _corrected(model, sigma, np.zeros_like(step), step, dmax)
+    after = np.max(np.abs(model.residual(chosen)))
+    if corrected:
+        assert full > dmax and after < 0.75 * dmax and not np.array_equal(chosen, step)
+    else:
+        assert full < 1e-2 * dmax and np.array_equal(chosen, step)
+
+
 def test_feedback_gains_shape():
     sol = solve_case("double_integrator")
     assert sol.gains_a.shape == (11, 3) and sol.gains_b.shape == (11, 3, 6)

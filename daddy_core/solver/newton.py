@@ -413,7 +413,7 @@ def _inner_iterations(model: ConstraintModel, sigma: BandedSigma, dmax: float,
     while (dmax > opts.tol_newton and r > opts.newton_cv_ratio
            and inner < opts.newton_inner_max_iter):
         step = sigma.step(d)
-        found = _backtrack(model, dY, step, d, dmax, opts)
+        found = _backtrack(model, dY, _corrected(model, sigma, dY, step, dmax), d, dmax, opts)
         if found is None:
             break
         alpha, dstar = found
@@ -424,6 +424,26 @@ def _inner_iterations(model: ConstraintModel, sigma: BandedSigma, dmax: float,
         dmax = new_max
         inner += 1
     return dY, inner, dmax
+
+
+def _corrected(model: ConstraintModel, sigma: BandedSigma, dY: np.ndarray, step: np.ndarray,
+               dmax: float) -> np.ndarray:
+    """The Newton step, or its second-order correction when the full step does not reduce
+    the model's max residual and the corrected one does: step - W D^T Sigma^-1 d(dY + step),
+    on the same factorisation.
+
+    Why: the full step meets the model's linearisation, so its residual d(dY + step) is the
+    model's second-order term alone; where that term dominates -- a weighted minimum-norm step
+    that turns a full-thrust control along its thrust sphere (|u|^2 <= u_max^2 is met to
+    first order and violated by |du|^2) -- the backtracking cut every step to 1/8-1/16 and
+    Newton crept linearly (MEO's fuel-optimal polishing: 8.0e-7 -> 5.3e-7 in 10 iterations,
+    then a stall). The correction, a step on the same Jacobian against that residual, removes
+    the second-order term to first order (Nocedal & Wright, sec. 18.3) and leaves alpha = 1."""
+    ahead = model.residual(dY + step)
+    if not float(np.max(np.abs(ahead))) >= dmax:   # (the full step will do; or NaN: as before)
+        return step
+    fixed = step + sigma.step(ahead)
+    return fixed if float(np.max(np.abs(model.residual(dY + fixed)))) < dmax else step
 
 
 def _backtrack(model: ConstraintModel, dY: np.ndarray, step: np.ndarray, d: np.ndarray,
