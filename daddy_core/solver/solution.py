@@ -45,7 +45,9 @@ class Solution:
             ``solve.repropagation_miss``); inf when the re-propagation failed (JSON: "inf").
         iterations: {restore, homotopy, aul, ddp, newton, kkt} (restore: Newton's on the
             start, newton: the polishing's); runtime_s: {total, ddp, newton, ...}.
-        history: per-homotopy-step summaries; units: {lu_km, tu_s, mu_kg, thrust_unit_n}.
+        history: per-homotopy-step summaries (``resolve: True`` on a re-solve of the last
+            step after a stalled KKT polishing, counted in iterations["homotopy"]); units:
+            {lu_km, tu_s, mu_kg, thrust_unit_n}.
         stage_maps: the last stage maps (``StageMaps``), in memory only (not in JSON/NPZ): a
             warm start from this solution rolls out and restores with them.
     """

@@ -8,7 +8,7 @@ from __future__ import annotations
 
 import math
 import time
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 
 import numpy as np
 
@@ -368,18 +368,14 @@ def _resolve(problem: Problem, hres: HomotopyResult, end: _End, hom: tuple, meth
     new.newton_iterations += end.newton_iterations
     new.kkt_iterations += end.kkt_iterations
     new.restore_iterations = end.restore_iterations
-    merged = HomotopyResult(
-        again.X, again.U, again.stages, again.mult, again.gains or hres.gains, again.rho,
-        hres.aul_iterations + again.aul_iterations,
-        hres.history + [dict(h, resolve=True) for h in again.history],
-        hres.converged, hres.reason, hres.stalled)
-    better = (new.converged and new.optimality is not None
-              and new.optimality.kkt_residual < end.optimality.kkt_residual)
-    if not better:
-        end.kkt_iterations = new.kkt_iterations
-        end.newton_iterations = new.newton_iterations
-        merged.gains, merged.mult = hres.gains, hres.mult
-    return merged, new if better else end
+    counted = dict(aul_iterations=hres.aul_iterations + again.aul_iterations,
+                   history=hres.history + [dict(h, resolve=True) for h in again.history])
+    if not (new.converged and new.optimality is not None
+            and new.optimality.kkt_residual < end.optimality.kkt_residual):
+        end.newton_iterations, end.kkt_iterations = new.newton_iterations, new.kkt_iterations
+        return replace(hres, **counted), end
+    return replace(again, gains=again.gains or hres.gains, converged=hres.converged,
+                   reason=hres.reason, stalled=hres.stalled, **counted), new
 
 
 def _assemble(problem: Problem, end: _End, hres: HomotopyResult, steps: tuple, method: Method,
