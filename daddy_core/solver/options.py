@@ -150,9 +150,10 @@ class SolverOptions:
             crawled at steps of 1e-4 until the time budget ran out; from the restored guess
             the energy step starts feasible and stays near it (robustness harness, random
             guesses: DRO->DRO 91 -> 96 of 100, halo 18 -> 21 of 30, Earth-Mars 100 of 100
-            either way; with the ballistic fallback DRO 100 of 100, halo 28 of 30). From the paper's near-zero guess the restoration converges on the
-            halo and DRO transfers (same optima) and stalls on Earth-Mars, Lyapunov and
-            NRHO->DRO (the guess is used as before).
+            either way; with the ballistic fallback DRO 100 of 100, halo 28 of 30). From the
+            paper's near-zero guess the restoration converges on the halo and DRO transfers
+            (same optima) and stalls on Earth-Mars, Lyapunov and NRHO->DRO (the guess is used
+            as before).
         map_reach: Newton and the restoration's rollout re-centre stage maps up to this many
             times their convergence radius (eps_da): Newton's residuals are exact, so
             derivatives a little less accurate only slow its convergence, and an outer
