@@ -174,26 +174,32 @@ def test_stage_maps_roll_out_and_restore_like_integration():
     assert isinstance(reused.maps, StageMaps)
 
 
-def test_weighted_newton_steps_keep_coasting_arcs_and_converge_in_one_iteration():
-    # Earth-Mars nominal plan from a start 1000 km / 1 m/s off (the re-plan benchmark's size):
-    # plain minimum-norm steps move the coasting stages' small controls and converge linearly
-    # on their mass-flow model error; steps weighted by the thrust level do not
-    from daddy_core.solver.newton import BandedSigma, ConstraintModel, column_weights, polish
+def _earth_mars_plan_moved(dr_m: float, dv_m_s: float):
+    """The node's bundled Earth-Mars fuel-optimal plan (a Solution), and its problem started
+    dr_m metres / dv_m_s m/s off the plan's first state (directions (0.6, -0.8, 0) and
+    (0.6, 0.8, 0)) with the plan's controls rolled out from there: (plan, problem, X0, opts)."""
     case = load_case("earth_mars")
     prob = problem_from_case(case)
     plan = Solution.from_json(pathlib.Path(__file__).parents[1] / "daddy_ros" / "plans"
                               / "earth_mars_fuel.json")
     u = case.units
-    moved = prob.with_x0(plan.X[0] + np.r_[u.length([6e5, -8e5, 0.0]), u.speed([0.6, 0.8, 0.0]),
-                                           0.0])
-    X0 = prob.rollout(plan.U, x0=moved.x0)
-    opts = case_options(case, True)
+    moved = prob.with_x0(plan.X[0] + np.r_[u.length([0.6 * dr_m, -0.8 * dr_m, 0.0]),
+                                           u.speed([0.6 * dv_m_s, 0.8 * dv_m_s, 0.0]), 0.0])
+    return plan, moved, prob.rollout(plan.U, x0=moved.x0), case_options(case, True)
+
+
+def test_weighted_newton_steps_keep_coasting_arcs_and_converge_in_one_iteration():
+    # Earth-Mars nominal plan from a start 1000 km / 1 m/s off (the re-plan benchmark's size):
+    # plain minimum-norm steps move the coasting stages' small controls and converge linearly
+    # on their mass-flow model error; steps weighted by the thrust level do not
+    from daddy_core.solver.newton import BandedSigma, ConstraintModel, column_weights, polish
+    plan, moved, X0, opts = _earth_mars_plan_moved(1e6, 1.0)
     assert opts.newton_control_weight_floor == 1e-2            # the default
     plain = polish(moved, X0, plan.U, opts.with_(newton_control_weight_floor=0.0))
     weighted = polish(moved, X0, plan.U, opts)
     assert plain.converged and weighted.converged
     assert weighted.iterations <= 2 < plain.iterations
-    coast = np.linalg.norm(plan.U, axis=1) < 1e-2 * prob.u_max
+    coast = np.linalg.norm(plan.U, axis=1) < 1e-2 * moved.u_max
     assert coast.sum() >= 5
     moved_by = {name: np.max(np.linalg.norm(r.U - plan.U, axis=1)[coast])
                 for name, r in (("plain", plain), ("weighted", weighted))}
@@ -208,23 +214,16 @@ def test_weighted_newton_steps_keep_coasting_arcs_and_converge_in_one_iteration(
     assert column_weights(problem_from_case(DI), np.ones((11, 3)), 1e-2) is None
 
 
-@pytest.mark.parametrize("km, corrected", [(1e3, False), (3e6, True)])
-def test_newton_corrects_a_step_that_its_second_order_term_undoes(km, corrected):
-    """Earth-Mars nominal plan from a start km off: the Newton step meets the model's
-    linearisation, and what is left at the full step is the model's second-order term. 1000 km
-    off that term is 1e-3 of the residual and the step is kept as it is; 3e6 km off it exceeds
-    the residual itself, and the second-order correction on the same factorisation takes the
-    full step below it (measured: 0.535 -> 1.07 uncorrected, 0.296 corrected)."""
+@pytest.mark.parametrize("dr_m, dv_m_s, corrected", [(1e3, 1.0, False), (3e6, 3e3, True)])
+def test_newton_corrects_a_step_that_its_second_order_term_undoes(dr_m, dv_m_s, corrected):
+    """Earth-Mars nominal plan from a start dr_m / dv_m_s off: the Newton step meets the
+    model's linearisation, and what is left at the full step is the model's second-order term.
+    1 km / 1 m/s off that term is 1e-3 of the residual and the step is kept as it is; 3000 km
+    / 3 km/s off it exceeds the residual itself, and the second-order correction on the same
+    factorisation takes the full step below it (measured: 0.535 -> 1.07 uncorrected, 0.296
+    corrected)."""
     from daddy_core.solver.newton import BandedSigma, ConstraintModel, _corrected, column_weights
-    case = load_case("earth_mars")
-    prob = problem_from_case(case)
-    plan = Solution.from_json(pathlib.Path(__file__).parents[1] / "daddy_ros" / "plans"
-                              / "earth_mars_fuel.json")
-    u = case.units
-    moved = prob.with_x0(plan.X[0] + np.r_[u.length([0.6 * km, -0.8 * km, 0.0]),
-                                           u.speed([6e-4 * km, 8e-4 * km, 0.0]), 0.0])
-    X0 = prob.rollout(plan.U, x0=moved.x0)
-    opts = case_options(case, True)
+    plan, moved, X0, opts = _earth_mars_plan_moved(dr_m, dv_m_s)
     model = ConstraintModel(moved, X0, plan.U, opts.newton_active_tol)
     sigma = BandedSigma(model.D, opts.newton_regularisation,
                         column_weights(moved, plan.U, opts.newton_control_weight_floor))
@@ -232,8 +231,9 @@ def test_newton_corrects_a_step_that_its_second_order_term_undoes(km, corrected)
     dmax = np.max(np.abs(d))
     step = sigma.step(d)
     full = np.max(np.abs(model.residual(step)))
-    chosen = _corrected(model, sigma, np.zeros_like(step), step, dmax)
-    after = np.max(np.abs(model.residual(chosen)))
+    chosen, there = _corrected(model, sigma, np.zeros_like(step), step, dmax)
+    np.testing.assert_array_equal(there, model.residual(chosen))
+    after = np.max(np.abs(there))
     if corrected:
         assert full > dmax and after < 0.75 * dmax and not np.array_equal(chosen, step)
     else:

@@ -412,8 +412,8 @@ def _inner_iterations(model: ConstraintModel, sigma: BandedSigma, dmax: float,
     inner = 0
     while (dmax > opts.tol_newton and r > opts.newton_cv_ratio
            and inner < opts.newton_inner_max_iter):
-        step = sigma.step(d)
-        found = _backtrack(model, dY, _corrected(model, sigma, dY, step, dmax), d, dmax, opts)
+        step, ahead = _corrected(model, sigma, dY, sigma.step(d), dmax)
+        found = _backtrack(model, dY, step, d, dmax, opts, ahead)
         if found is None:
             break
         alpha, dstar = found
@@ -427,10 +427,11 @@ def _inner_iterations(model: ConstraintModel, sigma: BandedSigma, dmax: float,
 
 
 def _corrected(model: ConstraintModel, sigma: BandedSigma, dY: np.ndarray, step: np.ndarray,
-               dmax: float) -> np.ndarray:
+               dmax: float) -> tuple[np.ndarray, np.ndarray]:
     """The Newton step, or its second-order correction when the full step does not reduce
     the model's max residual and the corrected one does: step - W D^T Sigma^-1 d(dY + step),
-    on the same factorisation.
+    on the same factorisation; with the model's residual at dY + the step returned (which
+    ``_backtrack`` takes instead of evaluating it again).
 
     Why: the full step meets the model's linearisation, so its residual d(dY + step) is the
     model's second-order term alone; where that term dominates -- a weighted minimum-norm step
@@ -441,16 +442,17 @@ def _corrected(model: ConstraintModel, sigma: BandedSigma, dY: np.ndarray, step:
     the second-order term to first order (Nocedal & Wright, sec. 18.3) and leaves alpha = 1."""
     ahead = model.residual(dY + step)
     if not float(np.max(np.abs(ahead))) >= dmax:   # (the full step will do; or NaN: as before)
-        return step
+        return step, ahead
     fixed = step + sigma.step(ahead)
-    return fixed if float(np.max(np.abs(model.residual(dY + fixed)))) < dmax else step
+    there = model.residual(dY + fixed)
+    return (fixed, there) if float(np.max(np.abs(there))) < dmax else (step, ahead)
 
 
 def _backtrack(model: ConstraintModel, dY: np.ndarray, step: np.ndarray, d: np.ndarray,
-               dmax: float, opts: SolverOptions):
+               dmax: float, opts: SolverOptions, ahead: np.ndarray | None = None):
     """The first of alpha = 1, s, s^2, ... (s = newton_ls_shrink, newton_ls_max_halvings
     trials) at which the model's max residual at dY + alpha step is below dmax, with that
-    residual; None if there is none.
+    residual; None if there is none (ahead: the residual at dY + step, if already evaluated).
 
     The model is a polynomial of degree 2 in Y, so along the step its residual is exactly
     d + alpha r1 + alpha^2 r2 (d: the residual at dY): the trial at alpha = 1 and one at
@@ -461,7 +463,8 @@ def _backtrack(model: ConstraintModel, dY: np.ndarray, step: np.ndarray, d: np.n
     def below(cand):
         return float(np.max(np.abs(cand))) < dmax   # (False for a NaN)
 
-    ahead = model.residual(dY + step)
+    if ahead is None:
+        ahead = model.residual(dY + step)
     if below(ahead):
         return 1.0, ahead
     alphas = opts.newton_ls_shrink ** np.arange(1, opts.newton_ls_max_halvings)
