@@ -222,7 +222,8 @@ def test_newton_corrects_a_step_that_its_second_order_term_undoes(dr_m, dv_m_s, 
     / 3 km/s off it exceeds the residual itself, and the second-order correction on the same
     factorisation takes the full step below it (measured: 0.535 -> 1.07 uncorrected, 0.296
     corrected)."""
-    from daddy_core.solver.newton import BandedSigma, ConstraintModel, _corrected, column_weights
+    from daddy_core.solver.newton import (BandedSigma, ConstraintModel, _corrected,
+                                          _inner_iterations, column_weights)
     plan, moved, X0, opts = _earth_mars_plan_moved(dr_m, dv_m_s)
     model = ConstraintModel(moved, X0, plan.U, opts.newton_active_tol)
     sigma = BandedSigma(model.D, opts.newton_regularisation,
@@ -238,6 +239,10 @@ def test_newton_corrects_a_step_that_its_second_order_term_undoes(dr_m, dv_m_s, 
         assert full > dmax and after < 0.75 * dmax and not np.array_equal(chosen, step)
     else:
         assert full < 1e-2 * dmax and np.array_equal(chosen, step)
+    # the inner iterations advance by the step they chose: the model residual they report is
+    # the one at the step they return
+    dY, inner, model_max = _inner_iterations(model, sigma, dmax, opts)
+    assert inner >= 1 and model_max == np.max(np.abs(model.residual(dY)))
 
 
 def test_feedback_gains_shape():
