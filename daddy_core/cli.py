@@ -32,6 +32,10 @@ def _parser() -> argparse.ArgumentParser:
     s.add_argument("--no-polish", action="store_true", help="skip the Newton polishing")
     s.add_argument("--warm-start", metavar="JSON", help="initial controls from a solution file")
     s.add_argument("--stages", type=int, help="override the stage count N")
+    s.add_argument("--r-min-km", type=float, metavar="KM",
+                   help="keep the whole trajectory, between the nodes too, at least KM from "
+                        "the Moon (Earth-Moon cases) or the Sun (Earth-Mars); reported as the "
+                        "minimum distance of the dense re-propagation")
     s.add_argument("--json", metavar="FILE", help="write the solution as JSON")
     s.add_argument("--npz", metavar="FILE", help="write the solution as NPZ")
     s.add_argument("--csv", metavar="FILE", help="write the trajectory as CSV (node times, SI "
@@ -85,7 +89,7 @@ def main(argv=None) -> int:
         fuel = not args.energy and case.system != "double_integrator"
         if args.fuel:
             fuel = True
-        problem = problem_from_case(case, stages=args.stages)
+        problem = problem_from_case(case, stages=args.stages, r_min_km=args.r_min_km)
         extra = {} if args.globalization is None else {"globalization": args.globalization}
         opts = case_options(case, fuel, time_budget_s=args.time_budget, **extra)
         if args.warm_start:
@@ -131,10 +135,11 @@ def main(argv=None) -> int:
 
 def _search(case, fuel: bool, args) -> RevolutionSearch:
     """``--search-revolutions``: the search, its trials printed as they are solved."""
-    if args.stages or args.warm_start or args.time_budget or args.globalization or args.no_polish:
+    if args.stages or args.warm_start or args.time_budget or args.globalization or \
+            args.no_polish or args.r_min_km:
         raise DaddyError("--search-revolutions solves from the case's cold guess with its own "
                          "stages and the default options: drop --stages, --warm-start, "
-                         "--time-budget, --globalization and --no-polish")
+                         "--time-budget, --globalization, --no-polish and --r-min-km")
     span = args.search_revolutions
     tol = args.search_tol or span / 20.0
     if not (span > 0 and tol > 0):
@@ -160,6 +165,10 @@ def _report(sol: Solution) -> None:
           f"re-propagation miss {sol.repropagation_miss if sol.repropagation_miss is None else f'{sol.repropagation_miss:.2e}'}")
     if sol.final_mass_kg is not None:
         print(f"  final mass {sol.final_mass_kg:.3f} kg  propellant {sol.propellant_kg:.3f} kg")
+    if sol.min_path_margin is not None:
+        print(f"  path constraint: minimum margin {sol.min_path_margin:.3e} along the DOP853 "
+              f"re-propagation ({sol.min_path_margin * sol.units.get('lu_km', 1.0):.3f} km for "
+              "a keep-out sphere)")
     if sol.cartesian_miss is not None:
         m = sol.cartesian_miss
         print(f"  flown in Cartesian coordinates in time (DOP853), the arrival misses the final "

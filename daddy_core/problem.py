@@ -25,6 +25,7 @@ from .dynamics.units import Spacecraft, Units, unit_units
 from .errors import DaddyError
 from .dynamics.rhs import Dynamics, as_dynamics
 from .integrators import rk4, rk78
+from . import path_constraints
 
 
 class StageStep:
@@ -118,7 +119,14 @@ class Problem:
             function f(x, u, dt) of an autonomous system.
         stage_cost: l(x, u, dt, hom) -> (B,).
         terminal_cost: phi(x, x_target) -> scalar.
-        g_ineq, g_eq: path constraints (x, u, dt) -> (n, B), or None.
+        g_ineq, g_eq: stage constraints (x, u, dt) -> (n, B), or None: held at the stage
+            points (x_k, u_k).
+        g_path: path constraint g(x, u) -> (n_p, B) <= 0 held along every stage, between the
+            nodes too (``path_constraints``): imposed at ``path_samples`` points per stage
+            (rows after g_ineq's among the stage inequalities), and checked by a dense DOP853
+            re-propagation after the solve, whose excess between the samples tightens them
+            (``path_offset``: (n_p, N) added to each stage's sampled rows; set by the solver).
+            Needs ``rhs``.
         g_tineq, g_teq: terminal constraints (x, x_target) -> (n,), or None.
         units: normalisation units (SI at the boundary); spacecraft: for mass reporting or None.
         u_max: thrust bound in normalised units (None if unbounded); reported and checked.
@@ -152,6 +160,9 @@ class Problem:
     t_start: float = 0.0
     time_index: Optional[int] = None
     labels: dict = field(default_factory=dict)
+    g_path: Optional[Callable] = None
+    path_samples: int = 4
+    path_offset: Optional[np.ndarray] = None
 
     def __post_init__(self):
         x0 = np.asarray(self.x0, dtype=float)
@@ -180,6 +191,15 @@ class Problem:
             object.__setattr__(self, "step", StageStep(self.step))
         if self.rhs is not None:
             object.__setattr__(self, "rhs", as_dynamics(self.rhs))
+        if self.g_path is not None:
+            if not callable(self.g_path):
+                raise DaddyError(f"problem.g_path must be callable, got {self.g_path!r}")
+            if self.rhs is None:
+                raise DaddyError("problem.g_path holds between the nodes, which needs the "
+                                 "continuous dynamics: give problem.rhs (e.g. flow_step's)")
+            if not (isinstance(self.path_samples, (int, np.integer)) and self.path_samples >= 1):
+                raise DaddyError(f"problem.path_samples must be a positive integer, got "
+                                 f"{self.path_samples!r}")
 
     @property
     def nx(self) -> int:
@@ -205,13 +225,20 @@ class Problem:
                        t_start=self.t_start if t_start is None else float(t_start))
 
     # -- batched evaluation helpers (floats or DA) ------------------------------------------
-    def path_constraints(self, x, u, dt):
-        """Stacked [g_ineq; g_eq] (n_ineq + n_eq, B) and the count of inequalities."""
+    def path_constraints(self, x, u, dt, t0=None):
+        """Stacked [g_ineq; sampled g_path; g_eq] (n_ineq + n_eq, B) and the count of
+        inequalities, for B stages from x (nx, B) under u (nu, B) with lengths dt (B,) starting
+        at t0 (B,; None: ``stage_t0[:B]``, the first B stages)."""
         parts, n_ineq = [], 0
         if self.g_ineq is not None:
             gi = self.g_ineq(x, u, dt)
             n_ineq = len(gi)
             parts.append(gi)
+        if self.g_path is not None:
+            t0 = self.stage_t0[:np.size(dt)] if t0 is None else t0
+            gp = path_constraints.sampled(self, x, u, dt, t0)
+            n_ineq += len(gp)
+            parts.append(gp)
         if self.g_eq is not None:
             parts.append(self.g_eq(x, u, dt))
         if not parts:
@@ -281,12 +308,15 @@ class Problem:
         checks = {
             "step": lambda: self.step(x, u, dt, t0),
             "stage_cost": lambda: self.stage_cost(x, u, dt, (0.0, 1.0)),
-            "path constraints": lambda: self.path_constraints(x, u, dt)[0],
+            "g_path": self.g_path and (lambda: self.g_path(x, u)),
+            "path constraints": lambda: self.path_constraints(x, u, dt, t0)[0],
             "terminal_cost": lambda: self.terminal_cost(self.x0, self.x_target),
             "terminal constraints": lambda: self.terminal_constraints(self.x0)[0],
         }
         shapes = {"step": (nx, 2), "stage_cost": (2,)}
         for name, fn in checks.items():
+            if fn is None:
+                continue
             try:
                 val = fn()
             except DaddyError:
@@ -299,6 +329,10 @@ class Problem:
             if name in shapes and val.shape != shapes[name]:
                 raise DaddyError(f"problem {name} returned shape {val.shape}, expected "
                                  f"{shapes[name]}")
+            if name == "g_path" and (val.ndim != 2 or val.shape[1] != 2):
+                raise DaddyError(f"problem g_path returned shape {val.shape} for a batch of 2 "
+                                 "stages, expected (n_p, 2): one row per constraint (a single "
+                                 "one: dm.stack([g]))")
             if not np.all(np.isfinite(val)):
                 raise DaddyError(f"problem {name} returned NaN or inf at the initial guess")
         self._check_on_da(U0[0])
@@ -318,6 +352,7 @@ class Problem:
                  ("stage_cost", lambda: self.stage_cost(x, u, dt, (0.0, 1.0)), (1,)),
                  ("g_ineq", self.g_ineq and (lambda: self.g_ineq(x, u, dt)), (None, 1)),
                  ("g_eq", self.g_eq and (lambda: self.g_eq(x, u, dt)), (None, 1)),
+                 ("g_path", self.g_path and (lambda: self.g_path(x, u)), (None, 1)),
                  ("terminal_cost", lambda: self.terminal_cost(xn, xt), ()),
                  ("g_tineq", self.g_tineq and (lambda: self.g_tineq(xn, xt)), (None,)),
                  ("g_teq", self.g_teq and (lambda: self.g_teq(xn, xt)), (None,))]
@@ -329,7 +364,7 @@ class Problem:
     def constraint_values(self, X: np.ndarray, U: np.ndarray):
         """Path constraints (n_c, N) and terminal constraints (n_t,) of a trajectory X
         (N+1, nx), U (N, nu), with their inequality counts: (g, n_ineq, gt, n_tineq)."""
-        g, ni = self.path_constraints(X[:-1].T, U.T, self.stage_dt)
+        g, ni = self.path_constraints(X[:-1].T, U.T, self.stage_dt, self.stage_t0)
         gt, nti = self.terminal_constraints(X[-1])
         return g, ni, gt, nti
 
@@ -351,10 +386,19 @@ class Problem:
             return {"name": f"{fn}[{i}]", "label": names[i] if i < len(names) else None,
                     "violation": violation, "stage": stage}
         if g is not None:
-            for i, row in enumerate(violations(g, ni)):
+            v = violations(g, ni)
+            n_p = 0 if self.g_path is None else len(self.g_path(X[:1].T, U[:1].T))
+            n_gi = ni - n_p * self.path_samples
+            for i, row in enumerate(v):
                 k = int(np.argmax(row))
-                out.append(entry("g_ineq", i, float(row[k]), k) if i < ni
-                           else entry("g_eq", i - ni, float(row[k]), k))
+                if i < n_gi:
+                    out.append(entry("g_ineq", i, float(row[k]), k))
+                elif i < n_gi + n_p:   # g_path component i - n_gi: its worst sample
+                    worst = v[i:ni:n_p].max(axis=0)
+                    k = int(np.argmax(worst))
+                    out.append(entry("g_path", i - n_gi, float(worst[k]), k))
+                elif i >= ni:
+                    out.append(entry("g_eq", i - ni, float(row[k]), k))
         if gt is not None:
             for i, val in enumerate(violations(gt, nti)):
                 out.append(entry("g_tineq", i, float(val), None) if i < nti

@@ -6,6 +6,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from daddy_core.path_constraints import dense_margin
 from daddy_core.problem import Problem, largest
 from daddy_core.solver import Solution
 
@@ -26,6 +27,9 @@ class Assessment:
         X: (N+1, nx) the trajectory of U (None when not safe).
         miss: max terminal-constraint violation of X, at least the solver's DOP853
             re-propagation miss (inf when not safe).
+        path_margin: problems with a g_path (keep-out zones): its true minimum margin along
+            the DOP853 re-propagation of X's stages (``path_constraints.dense_margin``; < 0:
+            violated between the nodes, not safe); None otherwise or when not checked.
     """
 
     safe: bool
@@ -34,6 +38,7 @@ class Assessment:
     U: np.ndarray
     X: np.ndarray | None = None
     miss: float = np.inf
+    path_margin: float | None = None
 
 
 def assess(sol: Solution, problem: Problem, feasibility_tol: float) -> Assessment:
@@ -64,8 +69,16 @@ def assess(sol: Solution, problem: Problem, feasibility_tol: float) -> Assessmen
     if g is not None and ni and not np.max(g[:ni]) <= 1e-6:   # (NaN: violated)
         return Assessment(False, False,
                           f"solution violates a path constraint by {np.max(g[:ni]):.2e}", U)
+    margin = None
+    if problem.g_path is not None:
+        # the keep-out holds along the whole flight, not only at the nodes: a plan whose
+        # dense re-propagation dips into it is not flown (tolerance: the node-wise one's)
+        margin = dense_margin(problem, X, U).margin
+        if not margin >= -1e-6:   # (NaN: violated)
+            return Assessment(False, False, f"solution violates g_path between the nodes by "
+                              f"{-margin:.2e} (dense re-propagation)", U, path_margin=margin)
     miss = largest(problem.terminal_violation(X[-1]), repro)
     if not miss <= feasibility_tol:
         return Assessment(True, False, f"terminal constraint missed by {miss:.2e} (normalised)",
-                          U, X, miss)
-    return Assessment(True, True, "", U, X, miss)
+                          U, X, miss, margin)
+    return Assessment(True, True, "", U, X, miss, margin)

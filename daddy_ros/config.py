@@ -42,6 +42,12 @@ class PlannerConfig:
     fuel_optimal: bool = option(True, "fuel-optimal cost (else energy-optimal)")
     stages: int = option(0, "stage count of the scenario (0: the case's own)",
                          bounds=(0, 100_000))
+    r_min_km: float = option(0.0, "keep the whole trajectory at least this far from the Moon "
+                                  "(Earth-Moon scenarios) or the Sun (heliocentric) [km]; "
+                                  "plans are checked along their dense re-propagation, not "
+                                  "only at the nodes; 0: the scenario's own (its "
+                                  "problem.r_min_km), none if it has none",
+                             bounds=(0.0, 1e9))
     tol_aul: float = option(0.0, "augmented-Lagrangian tolerance (0: the case's own for cold "
                                  "solves, 1e-5 for polished warm re-optimisations, which Newton "
                                  "then takes to tol_newton)", bounds=(0.0, 1.0))

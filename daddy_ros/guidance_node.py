@@ -230,7 +230,9 @@ class GuidanceNode(LifecycleNode):
     # ------------------------------------------------------------------ parameters
     def _bundled_plan(self) -> str:
         p = bundled_plan(self.planner.case.name, self.planner.config.fuel_optimal)
-        return str(p) if p is not None and not self.planner.config.stages else ""
+        # (the bundled plans have the case's own stages and no keep-out)
+        same = not self.planner.config.stages and self.planner.base_problem.g_path is None
+        return str(p) if p is not None and same else ""
 
     def _on_set_parameters(self, params):
         """Runtime updates: the ``runtime`` parameters of ``config`` (time_budget_s and
@@ -493,6 +495,9 @@ class GuidanceNode(LifecycleNode):
             values.update({"max_violation": f"{plan.max_violation:.3e}",
                            "final_mass_kg": f"{plan.states_si[-1, 6]:.4f}",
                            "thrust_bound_n": f"{plan.thrust_bound_n:.6g}"})
+            margin = plan.solution.min_path_margin
+            if margin is not None:   # a keep-out scenario: its margin in km
+                values["keep_out_margin_km"] = f"{margin * self.planner.units.lu_km:.3f}"
         self._diag(level, code, reason, values, stamp)
         self._last_solve = (level, reason, out.solve_time_s if out is not None else None,
                             time.time())

@@ -19,6 +19,7 @@ from pathlib import Path
 import numpy as np
 
 from daddy_core.catalogue import load_case, problem_from_case
+from daddy_core.path_constraints import dense_margin
 from daddy_core.errors import DaddyError
 from daddy_core.problem import Problem
 from daddy_core.solver import Solution, WarmStart, preload, solve
@@ -74,7 +75,8 @@ class GuidancePlanner:
         self.units = self.case.units
         self.grid = grid_of(self.case)   # where an estimate lies on the stages (time or angle)
         self.rated_problems = [
-            problem_from_case(self.case, stages=cfg.stages or None, max_thrust_n=rating)
+            problem_from_case(self.case, stages=cfg.stages or None, max_thrust_n=rating,
+                              r_min_km=cfg.r_min_km or None)
             for rating in margin_ratings(self.case.spacecraft.max_thrust_n, cfg.thrust_margin)]
         self.base_problem = self.rated_problems[0]
         self.policy = ReplanPolicy.of(self.case, cfg)
@@ -217,7 +219,8 @@ class GuidancePlanner:
                                      f"no better than flying it (miss {old_miss:.2e}){failed}",
                                      request_id, dt, None, sol.iterations, warm,
                                      Code.INFEASIBLE)
-        sol = replace(sol, U=v.U)   # the controls as flown (saturated onto the bound)
+        # the controls as flown (saturated onto the bound), and their keep-out margin
+        sol = replace(sol, U=v.U, min_path_margin=v.path_margin)
         plan = Plan.of(sol, v.X, stamp_s, self.units, best.problem.u_max, request_id, dt, warm)
         self.set_plan(plan)
         level, reason, code = Level.OK, "re-optimised", Code.OK
@@ -269,6 +272,14 @@ class GuidancePlanner:
         if sol.U.shape[0] != self.base_problem.N:
             raise DaddyError(f"plan file {path} has {sol.U.shape[0]} stages, scenario has "
                              f"{self.base_problem.N}")
+        if self.base_problem.g_path is not None:   # a keep-out scenario: held between nodes?
+            problem = self.base_problem.with_x0(sol.X[0], sol.stage_dt, sol.t_start)
+            margin = dense_margin(problem, sol.X, sol.U).margin
+            if not margin >= -1e-6:
+                raise DaddyError(f"plan file {path} violates the scenario's keep-out between "
+                                 f"the nodes by {-margin * self.units.lu_km:.3f} km (dense "
+                                 "re-propagation)")
+            sol.min_path_margin = margin
         last = sol.history[-1] if sol.history else {}
         if self.config.fuel_optimal and sol.fuel_optimal and "h" in last and "delta" in last:
             self.policy = self.policy.with_warm(homotopy=((last["h"], last["delta"]),))

@@ -3,6 +3,8 @@ dynamics, the pseudo-Huber stage cost of the fuel homotopy, the terminal cost, t
 dry-mass bounds, and the normalisation units."""
 from __future__ import annotations
 
+import math
+
 import numpy as np
 
 from ..da import functions as dm
@@ -61,12 +63,33 @@ def sundman_stage_cost(stage_cost, gm: float):
     return cost
 
 
+def keep_out(units, r_min_km: float):
+    """g_path(x, u) = r_min - |r - r_body| <= 0 [LU]: a keep-out sphere of radius r_min_km
+    around the Moon (Earth-Moon CR3BP, at (1 - mu, 0, 0)) or the Sun (heliocentric two-body, at
+    the origin), for ``Problem.g_path``: held along the whole trajectory, its margin in LU."""
+    if not (isinstance(r_min_km, (int, float)) and math.isfinite(r_min_km) and r_min_km > 0):
+        raise DaddyError(f"r_min_km must be a positive distance in km, got {r_min_km!r}")
+    centre = {"earth_moon_cr3bp": 1.0 - units.gm, "sun_two_body": 0.0}.get(units.name)
+    if centre is None:
+        raise DaddyError(f"r_min_km: no keep-out body for the {units.name} system (the Moon "
+                         "in earth_moon_cr3bp, the Sun in sun_two_body)")
+    r_min = r_min_km / units.lu_km
+
+    def g_path(x, u):
+        dx = x[0] - centre
+        return dm.stack([r_min - dm.sqrt(dx * dx + x[1] * x[1] + x[2] * x[2])])
+    return g_path
+
+
 def problem_from_case(case: Case, integrator: str = "rk78", integrator_tol: float | None = None,
-                      stages: int | None = None, max_thrust_n: float | None = None) -> Problem:
+                      stages: int | None = None, max_thrust_n: float | None = None,
+                      r_min_km: float | None = None) -> Problem:
     """Build the paper's problem for a catalogue ``Case`` (costs, constraints, units).
 
     ``max_thrust_n`` overrides the spacecraft's thrust bound (e.g. a derated bound that leaves
-    guidance a control margin); the cost scaling keeps the spacecraft's rating.
+    guidance a control margin); the cost scaling keeps the spacecraft's rating. ``r_min_km``
+    (or the case's ``problem.r_min_km``; the argument wins) keeps the whole trajectory that
+    far from the Moon (Earth-Moon CR3BP) or the Sun (heliocentric): ``keep_out``.
     """
     s = case.problem
     dt = case.stage_lengths(stages)
@@ -105,10 +128,12 @@ def problem_from_case(case: Case, integrator: str = "rk78", integrator_tol: floa
         return dm.stack([(u[0] * u[0] + u[1] * u[1] + u[2] * u[2]) * (1.0 / u_bound ** 2) - 1.0,
                          m_dry - x[6]])
 
+    r_min_km = s.get("r_min_km") if r_min_km is None else r_min_km
+    g_path = None if r_min_km is None else keep_out(units, r_min_km)
     return Problem(name=case.name, x0=case.x0, x_target=case.x_target, stage_dt=dt,
-                   step=flow_step(rhs, integrator, tol), stage_cost=stage_cost,
+                   g_path=g_path, step=flow_step(rhs, integrator, tol), stage_cost=stage_cost,
                    terminal_cost=terminal_cost, g_ineq=g_ineq,
                    g_teq=miss, units=units, spacecraft=sc, u_max=u_bound, mass_index=6, rhs=rhs,
                    t_start=case.t_start, time_index=5 if case.staged_in_angle else None,
-                   labels={"g_ineq": ("thrust bound", "dry mass"),
+                   labels={"g_ineq": ("thrust bound", "dry mass"), "g_path": ("keep-out",),
                            "g_teq": (ORBIT_LABELS if case.staged_in_angle else CARTESIAN_LABELS)})

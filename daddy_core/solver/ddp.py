@@ -233,6 +233,8 @@ def _trust_region_inverse(Quu: np.ndarray, Qu: np.ndarray, rho: float,
         if s <= radius * (1.0 + 1e-3):
             break
         ds = -float(np.sum(g * g / d ** 3)) / s           # d|a|/d lam
+        if not ds < 0.0:   # underflow (a radius near round-off): the ratio test rejects it
+            break
         lam -= (1.0 / radius - 1.0 / s) * s2 / ds
     return (V / (w + lam)) @ V.T
 

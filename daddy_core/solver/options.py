@@ -158,6 +158,12 @@ class SolverOptions:
             times their convergence radius (eps_da): Newton's residuals are exact, so
             derivatives a little less accurate only slow its convergence, and an outer
             iteration that does not reduce the residual expands afresh.
+    Path constraints (``Problem.g_path``; ``path_constraints``, ``path_exchange``):
+        path_exchange_rounds: after the solve, at most this many rounds of the exchange step:
+            the dense DOP853 check finds where g_path rises above zero between a stage's
+            samples, those samples are tightened by 1.25 times the excess and the last
+            homotopy step is solved again from the solution (0: the samples alone; the
+            dense margin is still reported, and a violation between them fails the solve).
     Homotopy (eq. 12-14):
         homotopy: sequence of (h, delta) pairs (h = Huber weight, delta = Huber width).
     Optimality (``optimality``: the relative KKT residual reported as
@@ -234,6 +240,7 @@ class SolverOptions:
     kkt_chord_iter: int = 6
     kkt_restore_iter: int = 4
     kkt_resolves: int = 1
+    path_exchange_rounds: int = 4
     time_budget_s: float | None = None
     verbose: bool = False
 

@@ -50,6 +50,9 @@ class Solution:
             {lu_km, tu_s, mu_kg, thrust_unit_n}.
         stage_maps: the last stage maps (``StageMaps``), in memory only (not in JSON/NPZ): a
             warm start from this solution rolls out and restores with them.
+        min_path_margin: the true minimum margin of ``Problem.g_path`` between the nodes
+            (dense DOP853 re-propagation, in g_path's units; >= 0: held everywhere), after the
+            exchange rounds (``SolverOptions.path_exchange_rounds``); None without g_path.
     """
 
     case: str
@@ -81,6 +84,9 @@ class Solution:
     # Earth-centred solutions solved by ``daddy solve``: trajectory_output.cartesian_miss (the
     # thrust flown in Cartesian coordinates in time against the final node; None otherwise)
     cartesian_miss: dict | None = None
+    # problems with a g_path: -max of g_path along the DOP853 re-propagation of every stage
+    # (``path_constraints.dense_margin``; >= 0: it holds between the nodes too); None otherwise
+    min_path_margin: float | None = None
     stage_maps: StageMaps | None = field(default=None, repr=False, compare=False)
 
     _ARRAYS = ("X", "U", "stage_dt", "gains_a", "gains_b")

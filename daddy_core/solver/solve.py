@@ -14,8 +14,9 @@ import numpy as np
 
 from ..errors import DaddyError
 from ..integrators import dop853, dop853_batch
+from ..path_constraints import violated_at_start
 from ..problem import Problem, largest
-from . import newton
+from . import newton, path_exchange
 from .ddp import DDPStats
 from .homotopy import HomotopyResult, continuation, homotopy_steps
 from .kkt_polish import kkt_polish
@@ -170,11 +171,27 @@ def solve(problem: Problem, u_guess=None, method: Method | str = Method.DYN,
     """
     opts = options or SolverOptions()
     method = Method.parse(method)
+    if progress is None and opts.verbose:
+        progress = print
+    sol = _solve(problem, u_guess, method, fuel_optimal, polish, opts, case_name, progress)
+    if problem.g_path is None:
+        return sol
+
+    def resolve(p: Problem, warm: WarmStart, o: SolverOptions) -> Solution:
+        return _solve(p, warm, method, None, polish, o, case_name, progress)
+    return path_exchange.hold(problem, sol, resolve, opts, progress)
+
+
+def _solve(problem: Problem, u_guess, method: Method, fuel_optimal: bool | None, polish: bool,
+           opts: SolverOptions, case_name: str | None, progress) -> Solution:
+    """``solve`` without the path constraints' exchange step: one run from the guess."""
     warm = WarmStart.of(u_guess, problem.stage_dt, opts.carry_rho, problem.t_start)
     U0 = problem.check_guess(np.full((problem.N, problem.nu), 1e-6) if warm.U is None else warm.U)
     steps = homotopy_steps(problem, U0, opts, fuel_optimal)
-    if progress is None and opts.verbose:
-        progress = print
+    if problem.g_path is not None:
+        why = violated_at_start(problem, U0[0], opts.tol_newton)
+        if why is not None:
+            return _unsolved(problem, U0, why, steps, method, case_name)
     clock = _Clock(opts.time_budget_s)
     stats = DDPStats()
     start = _warm_start(problem, U0, warm, opts, clock, progress)
@@ -432,6 +449,29 @@ def _assemble(problem: Problem, end: _End, hres: HomotopyResult, steps: tuple, m
         history=hres.history, units=units.as_dict(), polynomial_share=stats.polynomial_share,
         violations=violations,
         duals=_duals(problem, X, U, opt, hres, opts), rho=float(hres.rho), stage_maps=end.maps)
+
+
+def _unsolved(problem: Problem, U0: np.ndarray, reason: str, steps: tuple, method: Method,
+              case_name: str | None) -> Solution:
+    """The Solution of a problem refused before any iteration (``converged=False``, the reason):
+    the guess's own rollout (finite: ``_warm_start`` checks it the same way)."""
+    X = problem.rollout(U0)
+    if not np.all(np.isfinite(X)):
+        raise DaddyError("the initial guess propagates to a non-finite state")
+    violations = problem.violation_report(X, U0)
+    m, units, N, nu, nx = problem.mass_index, problem.units, problem.N, problem.nu, problem.nx
+    return Solution(
+        case=case_name or problem.name, method=method.value,
+        fuel_optimal=len(steps) > 1 or (steps[0][0] > 0), converged=False, reason=reason,
+        X=X, U=U0, stage_dt=problem.stage_dt.copy(), t_start=problem.t_start,
+        time_index=problem.time_index, gains_a=np.zeros((N, nu)),
+        gains_b=np.zeros((N, nu, nx)), cost=objective(problem, X, U0, steps[-1]),
+        max_violation=largest(0.0, *(r["violation"] for r in violations)),
+        final_mass_kg=float(X[-1, m] * units.mu_kg) if m is not None else None,
+        propellant_kg=float((X[0, m] - X[-1, m]) * units.mu_kg) if m is not None else None,
+        repropagation_miss=None, units=units.as_dict(), violations=violations,
+        iterations={"restore": 0, "homotopy": 0, "aul": 0, "ddp": 0, "newton": 0, "kkt": 0},
+        runtime_s={"total": 0.0})
 
 
 def _duals(problem: Problem, X, U, opt: Optimality | None, hres: HomotopyResult,

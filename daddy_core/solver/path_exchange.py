@@ -1,0 +1,68 @@
+"""The exchange step of path constraints (``path_constraints``): after a solve, check g_path
+along the re-propagated trajectory, tighten the samples of every stage where it rises above
+zero between them, and solve the last homotopy step again from there, until it holds
+everywhere."""
+from __future__ import annotations
+
+import time
+from dataclasses import replace
+
+from ..path_constraints import dense_margin, tightened
+from ..problem import Problem
+from .options import SolverOptions
+from .solution import Solution, WarmStart
+
+
+def _merged(first: Solution, later: list[Solution]) -> Solution:
+    """The last of ``later`` with the work of every solve counted: iterations and run times
+    summed, histories concatenated (each exchange round's entries marked ``path_round``)."""
+    last = later[-1]
+    iterations, runtime = dict(first.iterations), dict(first.runtime_s)
+    history = list(first.history)
+    for r, sol in enumerate(later, start=1):
+        for k, v in sol.iterations.items():
+            iterations[k] = iterations.get(k, 0) + v
+        for k, v in sol.runtime_s.items():
+            runtime[k] = runtime.get(k, 0.0) + v
+        history += [dict(h, path_round=r) for h in sol.history]
+    return replace(last, iterations=iterations, runtime_s=runtime, history=history)
+
+
+def hold(problem: Problem, sol: Solution, resolve, opts: SolverOptions, progress) -> Solution:
+    """``sol`` of ``problem`` with g_path held between the nodes: up to
+    ``opts.path_exchange_rounds`` rounds of (dense check, tighten the offending stages' samples,
+    ``resolve(problem, warm start, options)`` the last homotopy step from ``sol``). Returns the
+    last solve's Solution with ``min_path_margin`` (the dense check's) and every round's work
+    counted; ``converged`` is False, and the reason names the stage, when the constraint is
+    still violated between the nodes by more than tol_newton."""
+    start, first, later = time.perf_counter(), sol, []
+    pm = dense_margin(problem, sol.X, sol.U)
+    while len(later) < opts.path_exchange_rounds and sol.max_violation <= opts.tol_aul:
+        offset = tightened(problem.path_offset, pm, opts.tol_newton)
+        if offset is None:
+            break
+        last = sol.history[-1] if sol.history else None   # the homotopy step solved last
+        options = opts.with_(homotopy=((last["h"], last["delta"]),) if last
+                             else opts.homotopy[:1])
+        if opts.time_budget_s is not None:
+            left = opts.time_budget_s - sol.runtime_s.get("total", 0.0) \
+                - sum(s.runtime_s.get("total", 0.0) for s in later) \
+                - (time.perf_counter() - start)
+            if left <= 0:
+                break
+            options = options.with_(time_budget_s=left)
+        if progress is not None:
+            progress(f"path exchange {len(later) + 1}: g_path rises {-pm.margin:.2e} above its "
+                     f"bound between the samples (stage {pm.stage}, tau {pm.tau:.3f}): the "
+                     "offending stages' samples tightened, the last homotopy step solved again")
+        problem = replace(problem, path_offset=offset)
+        sol = resolve(problem, WarmStart(U=sol.U, duals=sol.duals), options)
+        later.append(sol)
+        pm = dense_margin(problem, sol.X, sol.U)
+    out = replace(_merged(first, later) if later else sol, min_path_margin=pm.margin)
+    if out.converged and not pm.margin >= -opts.tol_newton:
+        out = replace(out, converged=False,
+                      reason=f"g_path holds at its samples but not between them: "
+                             f"{-pm.margin:.2e} above its bound at stage {pm.stage} "
+                             f"(tau {pm.tau:.3f}) after {len(later)} exchange rounds")
+    return out
