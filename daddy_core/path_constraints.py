@@ -16,7 +16,8 @@ inequality per instant. It is solved here as semi-infinite programs are (Hettich
    falls between them). ``dense_margin`` re-propagates every stage with DOP853 on a fine grid
    and refines each stage's worst point; where the dense maximum of g exceeds zero, the
    solver tightens that stage's sampled rows by the measured excess (``tightened``) and solves
-   the last homotopy step again from there, until the dense check holds (``solve``).
+   the last homotopy step again from there, until the dense check holds
+   (``solver.path_exchange``).
 
 Why not the integrated smoothed violation of Pontryagin-Bellman DDP (Sidhoum & Oguri 2025, an
 extra state dq/dt = softplus_eps(g) driven to zero by a penalty)? Its integral is positive
@@ -35,7 +36,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from .da import functions as dm
-from .da.core import DA, variables
+from .da.core import DA, constant, variables
 from .errors import DaddyError
 from .integrators import dop853_batch
 
@@ -46,11 +47,33 @@ _DENSE_GRID = 24
 _REFINE_STEPS = 30
 
 
-def sampled(problem, x, u, dt, t0):
-    """The sampled path-constraint rows of stages starting at x (nx, B) under u (nu, B), with
-    lengths dt (B,) and starts t0 (B,): (M n_p, B), sample j's n_p components in rows
-    j n_p .. (j + 1) n_p - 1, each plus ``Problem.path_offset`` (the exchange's tightening of
-    its stage). Floats or DA alike: the sub-stage states come from the problem's stage flow."""
+def sampled(problem, x, u, dt, t0, need=None):
+    """The sampled path-constraint rows of B stages starting at x (nx, B) under u (nu, B), with
+    lengths dt (B,) and starts t0 (B,) -- the problem's first B stages: (M n_p, B), sample j's
+    n_p components in rows j n_p .. (j + 1) n_p - 1, each plus ``Problem.path_offset`` (the
+    exchange's tightening of its stage). Floats or DA alike: the sub-stage states come from
+    the problem's stage flow.
+
+    need: (B,) bool or None. On DA, only these stages' rows are expanded; the others carry
+    their values with zero derivatives. The sub-stage expansions are most of a constrained
+    solve's cost (a halo transfer with a keep-out that never binds: two thirds of it), and
+    where the caller discards a row's derivatives they are wasted: the augmented Lagrangian's
+    inactive inequalities (g < 0 with a zero multiplier: their term is exactly zero,
+    ``Problem.path_rows_in_use``). (Not Newton's inactive rows: its model checks that a step
+    keeps them met, with their derivatives.)"""
+    if need is not None and isinstance(x, DA) and not np.all(need):
+        values = sampled(problem, x.cons, dm.cons(u), dt, t0)
+        out = constant(values, x.n, x.order)
+        k = np.flatnonzero(need)
+        if k.size:
+            part = _sampled(problem, x[:, k], u[:, k], np.asarray(dt)[k], np.asarray(t0)[k], k)
+            out.c[:, :, k] = part.c
+        return out
+    return _sampled(problem, x, u, dt, t0, np.arange(np.size(dt)))
+
+
+def _sampled(problem, x, u, dt, t0, stages: np.ndarray):
+    """``sampled`` of the stages ``stages`` (indices into the problem's, for the offsets)."""
     M = problem.path_samples
     h = np.asarray(dt, dtype=float) / M
     rows, xs = [], x
@@ -58,7 +81,7 @@ def sampled(problem, x, u, dt, t0):
         xs = problem.step(xs, u, h, np.asarray(t0, dtype=float) + j * h)
         g = problem.g_path(xs, u)
         if problem.path_offset is not None:
-            g = g + problem.path_offset[:, :h.size]
+            g = g + problem.path_offset[:, stages]
         rows.append(g)
     return rows[0] if M == 1 else dm.concatenate(rows)
 
@@ -154,13 +177,22 @@ def dense_margin(problem, X: np.ndarray, U: np.ndarray) -> PathMargin:
 
 
 def tightened(offset: np.ndarray | None, pm: PathMargin, tol: float) -> np.ndarray | None:
-    """The exchange step: the sampled rows' offsets (n_p, N) raised, on every stage whose dense
-    maximum exceeds ``tol``, by 1.25 times that excess over zero (the samples then sit below
-    the boundary by what the constraint rises between them, plus a quarter for the trajectory
-    moving when it is solved again). None when no stage needs it."""
+    """The exchange step: the sampled rows' offsets (n_p, N), raised on every stage whose dense
+    maximum exceeds ``tol`` to the larger of 1.25 times the stage's excess (what g rises
+    between its samples above the largest of them: with the samples held that far inside,
+    the dense maximum is below zero) and the old offset plus 1.25 times the violation (the
+    trajectory moved when it was solved again; the offset then still grows). A quarter more
+    than measured because the solution moves when it is solved again. None when no stage
+    needs it.
+
+    Why the excess and not only the violation: the samples need not be active where the
+    constraint is violated (Earth-Mars with the Sun 0.9 AU away: the closest approach fell
+    between two samples 2.7e-5 and 5.1e-5 AU inside the bound, the dense maximum 8.7e-6
+    above it); tightening by the violation alone changed nothing until the offsets had
+    grown past the samples' slack (four rounds instead of one)."""
     over = pm.worst > tol
     if not np.any(over):
         return None
     base = np.zeros_like(pm.worst) if offset is None else np.array(offset, dtype=float)
-    base[over] += 1.25 * pm.worst[over]
+    base[over] = np.maximum(1.25 * pm.excess[over], base[over] + 1.25 * pm.worst[over])
     return base

@@ -225,10 +225,26 @@ class Problem:
                        t_start=self.t_start if t_start is None else float(t_start))
 
     # -- batched evaluation helpers (floats or DA) ------------------------------------------
-    def path_constraints(self, x, u, dt, t0=None):
+    @cached_property
+    def n_path_rows(self) -> int:
+        """How many stage inequalities the sampled g_path adds (path_samples x its components;
+        0 without g_path): the last rows of the stage inequalities."""
+        if self.g_path is None:
+            return 0
+        return self.path_samples * len(self.g_path(self.x0[:, None], np.zeros((self.nu, 1))))
+
+    def path_rows_in_use(self, active: np.ndarray, n_ineq: int) -> np.ndarray:
+        """(B,) bool: the stages with any sampled g_path row ``active`` ((n_c, B) over the
+        stacked stage constraints, n_ineq inequalities): the ``need`` of
+        ``path_constraints``."""
+        rows = slice(n_ineq - self.n_path_rows, n_ineq)
+        return np.any(active[rows], axis=0)
+
+    def path_constraints(self, x, u, dt, t0=None, need=None):
         """Stacked [g_ineq; sampled g_path; g_eq] (n_ineq + n_eq, B) and the count of
         inequalities, for B stages from x (nx, B) under u (nu, B) with lengths dt (B,) starting
-        at t0 (B,; None: ``stage_t0[:B]``, the first B stages)."""
+        at t0 (B,; None: ``stage_t0[:B]``, the first B stages). need: (B,) bool, the stages
+        whose g_path rows are expanded on DA (``path_constraints.sampled``; None: all)."""
         parts, n_ineq = [], 0
         if self.g_ineq is not None:
             gi = self.g_ineq(x, u, dt)
@@ -236,7 +252,7 @@ class Problem:
             parts.append(gi)
         if self.g_path is not None:
             t0 = self.stage_t0[:np.size(dt)] if t0 is None else t0
-            gp = path_constraints.sampled(self, x, u, dt, t0)
+            gp = path_constraints.sampled(self, x, u, dt, t0, need)
             n_ineq += len(gp)
             parts.append(gp)
         if self.g_eq is not None:
@@ -387,8 +403,8 @@ class Problem:
                     "violation": violation, "stage": stage}
         if g is not None:
             v = violations(g, ni)
-            n_p = 0 if self.g_path is None else len(self.g_path(X[:1].T, U[:1].T))
-            n_gi = ni - n_p * self.path_samples
+            n_p = self.n_path_rows // self.path_samples
+            n_gi = ni - self.n_path_rows
             for i, row in enumerate(v):
                 k = int(np.argmax(row))
                 if i < n_gi:

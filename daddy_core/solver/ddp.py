@@ -223,6 +223,8 @@ def _trust_region_inverse(Quu: np.ndarray, Qu: np.ndarray, rho: float,
     iteration; nearly linear in lam, so a few iterations reach 1e-3 of the radius): unlike
     a rescaled Newton step it turns the step towards the gradient where Quu is ill-conditioned,
     and the feedback gains b_k use the same shifted Hessian."""
+    if not radius > 0.0:   # no step at all: (Quu + inf I)^-1 (the test that stops DDP follows)
+        return np.zeros_like(Quu)
     w, V = np.linalg.eigh(Quu)
     g = V.T @ Qu
     lam = rho
