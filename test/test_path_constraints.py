@@ -153,3 +153,20 @@ def test_planner_refuses_plans_that_dip_into_the_keep_out(keep_out_25000, node_w
     assert not verdict.safe and "between the nodes" in verdict.reason
     verdict = assess(sol, planner.rated_problems[-1], 1e-8)   # (solved at the full rating)
     assert verdict.safe and verdict.feasible and verdict.path_margin >= -1e-10
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("r_min_km, closest_km, mass_kg", [
+    (20_000.0, 24_461.0, 973.9412),    # does not bind: the free transfer's closest approach
+    (30_000.0, 30_000.0, 973.416),     # binds by 5,500 km: 0.5 kg of propellant
+])
+def test_keep_out_from_the_case_guess(r_min_km, closest_km, mass_kg):
+    """The r_min table as ``daddy solve halo_l2_l1 --r-min-km`` solves it (the case's guess)."""
+    problem = problem_from_case(HALO, r_min_km=r_min_km)
+    sol = solve(problem, HALO.cold_guess(problem.N), options=case_options(HALO, True))
+    assert sol.converged, sol.reason
+    assert sol.max_violation <= 1e-10 and sol.min_path_margin >= -1e-10
+    true_min = moon_distance_km(problem, sol.X, sol.U)
+    assert true_min >= r_min_km - 1e-5
+    assert true_min == pytest.approx(closest_km, abs=5.0)
+    assert sol.final_mass_kg == pytest.approx(mass_kg, abs=0.01)

@@ -509,3 +509,51 @@ def test_an_earth_centred_scenario_is_flown_from_eci_odometry(graph, tmp_path):
         spin.shutdown()
         node.stop()
         node.destroy_node()
+
+
+def test_a_keep_out_scenario_adopts_and_reports_plans_held_between_the_nodes(graph, tmp_path):
+    """A halo scenario with a 25,000 km keep-out around the Moon (``r_min_km``) over the
+    graph: its nominal (a keep-out solution) is adopted, a warm re-plan from a perturbed
+    estimate keeps out along its dense re-propagation and reports the margin in km; the
+    bundled plan, solved without the keep-out, is not used (plans that dip in are refused:
+    ``test_path_constraints``)."""
+    from daddy_core.catalogue import load_case, problem_from_case
+    from daddy_core.solver import case_options, solve
+    from daddy_ros.spin import SpinThread
+    case = load_case("halo_l2_l1")
+    problem = problem_from_case(case, r_min_km=25_000.0)
+    nominal = solve(problem, options=case_options(case, True))
+    assert nominal.converged and nominal.min_path_margin >= -1e-10
+    path = tmp_path / "halo_keep_out.json"
+    nominal.to_json(path)
+    node = GuidanceNode(namespace="/ko", scenario="halo_l2_l1", frame_id="em_rotating",
+                        r_min_km=25_000.0, plan_file=str(path), thrust_margin=0.0,
+                        self_replan=False)
+    spin = SpinThread(node)
+    c = GuidanceClient("em_rotating", name="daddy_keep_out_client", namespace="/ko")
+    try:
+        sim = TruthSim("halo_l2_l1", t0_s=T0)
+        pos, vel, mass = sim.truth_si()
+        end = time.monotonic() + 30
+        while time.monotonic() < end and not c.schedules:
+            c.publish_estimate(pos, vel, mass, T0)
+            c.wait_for(lambda: c.schedules, 2.0)
+        assert c.schedules, "the keep-out nominal was not adopted"
+        plan = node.planner.plan
+        for j in range(2):
+            sim.apply(plan.thrust_n[j], plan.stage_dt_s[j])
+        p, v, m = sim.truth_si()
+        c.publish_estimate(p + [2e4, 0, 0], v + [0.5, 0, 0], m, sim.t_s)
+        c.wait_for(lambda: c.thrust, 10)
+        c.request("ko-1", sim.t_s)
+        st = c.wait_for(lambda: c.status_for("ko-1"), 120)
+        assert st, "no diagnostics for ko-1"
+        vals = {kv.key: kv.value for kv in st.values}
+        assert vals["code"] == "OK" and vals["plan_kept"] == "no", st.message
+        assert float(vals["keep_out_margin_km"]) >= -1e-6
+        assert node.planner.plan.solution.min_path_margin >= -1e-6 / problem.units.lu_km
+    finally:
+        c.close()
+        spin.shutdown()
+        node.stop()
+        node.destroy_node()
