@@ -225,15 +225,24 @@ def _warm_start(problem: Problem, U0, warm: WarmStart, opts: SolverOptions, cloc
         raise DaddyError("the initial guess propagates to a non-finite state")
     start = _Start(X, U0)
     if opts.restore_start:
-        res = newton.restore(problem, X, U0, opts, clock.deadline, maps=maps)
-        start.restore_iterations = res.iterations
-        if not res.converged and maps is None and warm.duals is None:   # a cold start
-            ballistic = _restore_ballistic(problem, X, U0, res, opts, clock.deadline, progress)
-            if ballistic is not None:
-                start.restore_iterations += ballistic.iterations
-                res = ballistic if ballistic.converged else res
+        cold = maps is None and warm.duals is None
+        res, start.restore_iterations = _restore(problem, X, U0, maps, cold, opts, clock,
+                                                 progress)
+        relaxed = False
+        if not res.converged and problem.g_path is not None:
+            # a start that meets everything but the path constraint: the augmented Lagrangian
+            # takes it from there, where DDP from the raw guess would start far off (halo with
+            # a 20,000 km keep-out from random guesses: restorations that dive inside the
+            # sphere stall, and DDP from those guesses ran into the time cap)
+            alt, n = _restore(replace(problem, g_path=None), X, U0, maps, cold, opts, clock,
+                              progress)
+            start.restore_iterations += n
+            if alt.converged:
+                res, relaxed = alt, True
         if res.converged:
-            start.X, start.U, start.restored = res.X, res.U, res
+            start.X, start.U = res.X, res.U
+            if not relaxed:   # (a feasible iterate to fall back on)
+                start.restored = res
             if res.maps is not None:
                 # the DDP starts from the Newton model's maps, re-centred as Newton re-centres
                 # them, with the restored flows as their values
@@ -244,10 +253,26 @@ def _warm_start(problem: Problem, U0, warm: WarmStart, opts: SolverOptions, cloc
         else:   # DDP starts from the guess, where Newton's first model expanded the stages
             start.F = res.start_F
         if progress:
-            progress(f"start restored by Newton: {res.iterations} iterations, max violation"
-                     f" {res.max_violation:.2e} ({res.reason})")
+            progress(f"start restored by Newton{' (without g_path)' if relaxed else ''}: "
+                     f"{res.iterations} iterations, max violation {res.max_violation:.2e} "
+                     f"({res.reason})")
     clock.lap("restore", t0)
     return start
+
+
+def _restore(problem: Problem, X, U0, maps, cold: bool, opts: SolverOptions, clock: _Clock,
+             progress) -> tuple[newton.NewtonResult, int]:
+    """Newton's restoration of (X, U0) and, for a cold start it cannot restore, of the
+    ballistic trajectory (``_restore_ballistic``): the result to start from and the Newton
+    iterations spent."""
+    res = newton.restore(problem, X, U0, opts, clock.deadline, maps=maps)
+    spent = res.iterations
+    if not res.converged and cold:
+        ballistic = _restore_ballistic(problem, X, U0, res, opts, clock.deadline, progress)
+        if ballistic is not None:
+            spent += ballistic.iterations
+            res = ballistic if ballistic.converged else res
+    return res, spent
 
 
 # a ballistic trajectory within this fraction of the state's size (max |x|, normalised units)
