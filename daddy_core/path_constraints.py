@@ -47,28 +47,31 @@ _DENSE_GRID = 24
 _REFINE_STEPS = 30
 
 
-def sampled(problem, x, u, dt, t0, need=None):
+def sampled(problem, x, u, dt, t0, in_use=None):
     """The sampled path-constraint rows of B stages starting at x (nx, B) under u (nu, B), with
     lengths dt (B,) and starts t0 (B,) -- the problem's first B stages: (M n_p, B), sample j's
     n_p components in rows j n_p .. (j + 1) n_p - 1, each plus ``Problem.path_offset`` (the
     exchange's tightening of its stage). Floats or DA alike: the sub-stage states come from
     the problem's stage flow.
 
-    need: (B,) bool or None. On DA, only these stages' rows are expanded; the others carry
-    their values with zero derivatives. The sub-stage expansions are most of a constrained
-    solve's cost (a halo transfer with a keep-out that never binds: two thirds of it), and
-    where the caller discards a row's derivatives they are wasted: the augmented Lagrangian's
-    inactive inequalities (g < 0 with a zero multiplier: their term is exactly zero,
-    ``Problem.path_rows_in_use``). (Not Newton's inactive rows: its model checks that a step
-    keeps them met, with their derivatives.)"""
-    if need is not None and isinstance(x, DA) and not np.all(need):
-        values = sampled(problem, x.cons, dm.cons(u), dt, t0)
-        out = constant(values, x.n, x.order)
-        k = np.flatnonzero(need)
-        if k.size:
-            part = _sampled(problem, x[:, k], u[:, k], np.asarray(dt)[k], np.asarray(t0)[k], k)
-            out.c[:, :, k] = part.c
-        return out
+    in_use: None, or a function of the rows' values (M n_p, B) -> (B,) bool, the stages whose
+    rows the caller uses. On DA, the rows are then evaluated on floats first and expanded only
+    on those stages; the others carry their values with zero derivatives. The sub-stage
+    expansions are most of a constrained solve's cost (a halo transfer with a keep-out that
+    never binds: two thirds of it), and where the caller discards a row's derivatives they are
+    wasted: the augmented Lagrangian's inactive inequalities (g < 0 with a zero multiplier:
+    their term is exactly zero, ``lagrangian.augmented_stage_cost``). (Not Newton's inactive
+    rows: its model checks that a step keeps them met, with their derivatives.)"""
+    if in_use is not None and isinstance(x, DA):
+        values = _sampled(problem, x.cons, dm.cons(u), dt, t0, np.arange(np.size(dt)))
+        k = np.flatnonzero(in_use(values))
+        if k.size < np.size(dt):
+            out = constant(values, x.n, x.order)
+            if k.size:
+                part = _sampled(problem, x[:, k], u[:, k], np.asarray(dt)[k],
+                                np.asarray(t0)[k], k)
+                out.c[:, :, k] = part.c
+            return out
     return _sampled(problem, x, u, dt, t0, np.arange(np.size(dt)))
 
 

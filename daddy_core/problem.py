@@ -233,18 +233,11 @@ class Problem:
             return 0
         return self.path_samples * len(self.g_path(self.x0[:, None], np.zeros((self.nu, 1))))
 
-    def path_rows_in_use(self, active: np.ndarray, n_ineq: int) -> np.ndarray:
-        """(B,) bool: the stages with any sampled g_path row ``active`` ((n_c, B) over the
-        stacked stage constraints, n_ineq inequalities): the ``need`` of
-        ``path_constraints``."""
-        rows = slice(n_ineq - self.n_path_rows, n_ineq)
-        return np.any(active[rows], axis=0)
-
-    def path_constraints(self, x, u, dt, t0=None, need=None):
+    def path_constraints(self, x, u, dt, t0=None, in_use=None):
         """Stacked [g_ineq; sampled g_path; g_eq] (n_ineq + n_eq, B) and the count of
         inequalities, for B stages from x (nx, B) under u (nu, B) with lengths dt (B,) starting
-        at t0 (B,; None: ``stage_t0[:B]``, the first B stages). need: (B,) bool, the stages
-        whose g_path rows are expanded on DA (``path_constraints.sampled``; None: all)."""
+        at t0 (B,; None: ``stage_t0[:B]``, the first B stages). in_use: which stages' g_path
+        rows are expanded on DA, from their values (``path_constraints.sampled``; None: all)."""
         parts, n_ineq = [], 0
         if self.g_ineq is not None:
             gi = self.g_ineq(x, u, dt)
@@ -252,7 +245,7 @@ class Problem:
             parts.append(gi)
         if self.g_path is not None:
             t0 = self.stage_t0[:np.size(dt)] if t0 is None else t0
-            gp = path_constraints.sampled(self, x, u, dt, t0, need)
+            gp = path_constraints.sampled(self, x, u, dt, t0, in_use)
             n_ineq += len(gp)
             parts.append(gp)
         if self.g_eq is not None:

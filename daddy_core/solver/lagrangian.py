@@ -12,7 +12,6 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .. import da
 from ..da import functions as dm
 from ..problem import Problem
 
@@ -80,13 +79,12 @@ def penalty(g, lam, mu, n_ineq: int):
 def augmented_stage_cost(problem: Problem, x, u, mult: Multipliers, hom):
     """l~ (eq. 8) of every stage, (N,): floats or DA alike."""
     lt = problem.stage_cost(x, u, problem.stage_dt, hom)
-    need = None
-    if problem.g_path is not None and isinstance(x, da.DA):
-        # the sampled rows of stages where every one is inactive add exactly zero (``penalty``):
-        # their sub-stage expansions are skipped
-        g0, ni = problem.path_constraints(x.cons, dm.cons(u), problem.stage_dt)
-        need = problem.path_rows_in_use(~((g0 < 0) & (mult.lam == 0)), ni)
-    g, _ = problem.path_constraints(x, u, problem.stage_dt, need=need)
+    # the sampled g_path rows (the last inequalities) of a stage where every one is inactive
+    # add exactly zero (``penalty``): their sub-stage expansions are skipped
+    lam_path = mult.lam[mult.n_ineq - problem.n_path_rows:mult.n_ineq]
+    g, _ = problem.path_constraints(
+        x, u, problem.stage_dt,
+        in_use=lambda g0: np.any(~((g0 < 0) & (lam_path == 0)), axis=0))
     return lt if g is None else lt + penalty(g, mult.lam, mult.mu, mult.n_ineq)
 
 
