@@ -44,9 +44,8 @@ def hold(problem: Problem, sol: Solution, resolve, opts: SolverOptions, progress
         last = sol.history[-1] if sol.history else None   # the homotopy step solved last
         options = opts.with_(homotopy=((last["h"], last["delta"]),) if last
                              else opts.homotopy[:1])
-        if opts.time_budget_s is not None:
-            left = opts.time_budget_s - sol.runtime_s.get("total", 0.0) \
-                - sum(s.runtime_s.get("total", 0.0) for s in later) \
+        if opts.time_budget_s is not None:   # the first solve's time and every round's since
+            left = opts.time_budget_s - first.runtime_s.get("total", 0.0) \
                 - (time.perf_counter() - start)
             if left <= 0:
                 break
