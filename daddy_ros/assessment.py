@@ -72,8 +72,11 @@ def assess(sol: Solution, problem: Problem, feasibility_tol: float) -> Assessmen
     margin = None
     if problem.g_path is not None:
         # the keep-out holds along the whole flight, not only at the nodes: a plan whose
-        # dense re-propagation dips into it is not flown (tolerance: the node-wise one's)
-        margin = dense_margin(problem, X, U).margin
+        # dense re-propagation dips into it is not flown (tolerance: the node-wise one's).
+        # The solve's own dense check holds for its trajectory (the path exchange ran it on
+        # these X and U); controls changed by the saturation are checked again
+        margin = sol.min_path_margin if X is sol.X and sol.min_path_margin is not None \
+            else dense_margin(problem, X, U).margin
         if not margin >= -1e-6:   # (NaN: violated)
             return Assessment(False, False, f"solution violates g_path between the nodes by "
                               f"{-margin:.2e} (dense re-propagation)", U, path_margin=margin)
