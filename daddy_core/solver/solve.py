@@ -430,7 +430,6 @@ def _assemble(problem: Problem, end: _End, hres: HomotopyResult, steps: tuple, m
     gmax = largest(0.0, *(r["violation"] for r in violations))
     if not polish and not gmax <= opts.tol_aul:   # (NaN: not converged)
         converged = False
-    units, m_idx = problem.units, problem.mass_index
     N, nu, nx = problem.N, problem.nu, problem.nx
     t0 = time.perf_counter()
     miss = repropagation_miss(problem, U, X, end.maps)
@@ -452,17 +451,11 @@ def _assemble(problem: Problem, end: _End, hres: HomotopyResult, steps: tuple, m
     t = clock.times
     gains = hres.gains
     return Solution(
-        case=case_name or problem.name, method=method.value,
-        fuel_optimal=len(steps) > 1 or (steps[0][0] > 0), converged=converged, reason=reason,
-        X=X, U=U, stage_dt=problem.stage_dt.copy(), t_start=problem.t_start,
-        time_index=problem.time_index,
+        **_described(problem, X, U, steps, method, case_name), converged=converged,
+        reason=reason,
         gains_a=gains.a if gains else np.zeros((N, nu)),
-        gains_b=gains.b if gains else np.zeros((N, nu, nx)),
-        cost=objective(problem, X, U, steps[-1]), max_violation=gmax,
-        kkt_residual=None if opt is None else opt.kkt_residual,
-        final_mass_kg=float(X[-1, m_idx] * units.mu_kg) if m_idx is not None else None,
-        propellant_kg=float((X[0, m_idx] - X[-1, m_idx]) * units.mu_kg)
-        if m_idx is not None else None, repropagation_miss=miss,
+        gains_b=gains.b if gains else np.zeros((N, nu, nx)), max_violation=gmax,
+        kkt_residual=None if opt is None else opt.kkt_residual, repropagation_miss=miss,
         iterations={"restore": end.restore_iterations, "homotopy": len(hres.history),
                     "aul": hres.aul_iterations, "ddp": stats.iterations,
                     "newton": end.newton_iterations, "kkt": end.kkt_iterations},
@@ -471,9 +464,24 @@ def _assemble(problem: Problem, end: _End, hres: HomotopyResult, steps: tuple, m
                    "forward": stats.forward_s, "expansion": stats.expansion_s,
                    "backward": stats.backward_s, "repropagation": t["repropagation"],
                    "optimality": t["optimality"], "kkt": t.get("kkt", 0.0)},
-        history=hres.history, units=units.as_dict(), polynomial_share=stats.polynomial_share,
+        history=hres.history, polynomial_share=stats.polynomial_share,
         violations=violations,
         duals=_duals(problem, X, U, opt, hres, opts), rho=float(hres.rho), stage_maps=end.maps)
+
+
+def _described(problem: Problem, X: np.ndarray, U: np.ndarray, steps: tuple, method: Method,
+               case_name: str | None) -> dict:
+    """The Solution fields that describe (X, U) of ``problem`` whatever the solve did: what
+    was solved, the trajectory, its cost at the last homotopy step and its mass figures."""
+    m, units = problem.mass_index, problem.units
+    return dict(
+        case=case_name or problem.name, method=method.value,
+        fuel_optimal=len(steps) > 1 or (steps[0][0] > 0), X=X, U=U,
+        stage_dt=problem.stage_dt.copy(), t_start=problem.t_start,
+        time_index=problem.time_index, cost=objective(problem, X, U, steps[-1]),
+        final_mass_kg=float(X[-1, m] * units.mu_kg) if m is not None else None,
+        propellant_kg=float((X[0, m] - X[-1, m]) * units.mu_kg) if m is not None else None,
+        units=units.as_dict())
 
 
 def _unsolved(problem: Problem, U0: np.ndarray, reason: str, steps: tuple, method: Method,
@@ -484,17 +492,12 @@ def _unsolved(problem: Problem, U0: np.ndarray, reason: str, steps: tuple, metho
     if not np.all(np.isfinite(X)):
         raise DaddyError("the initial guess propagates to a non-finite state")
     violations = problem.violation_report(X, U0)
-    m, units, N, nu, nx = problem.mass_index, problem.units, problem.N, problem.nu, problem.nx
+    N, nu, nx = problem.N, problem.nu, problem.nx
     return Solution(
-        case=case_name or problem.name, method=method.value,
-        fuel_optimal=len(steps) > 1 or (steps[0][0] > 0), converged=False, reason=reason,
-        X=X, U=U0, stage_dt=problem.stage_dt.copy(), t_start=problem.t_start,
-        time_index=problem.time_index, gains_a=np.zeros((N, nu)),
-        gains_b=np.zeros((N, nu, nx)), cost=objective(problem, X, U0, steps[-1]),
+        **_described(problem, X, U0, steps, method, case_name), converged=False, reason=reason,
+        gains_a=np.zeros((N, nu)), gains_b=np.zeros((N, nu, nx)),
         max_violation=largest(0.0, *(r["violation"] for r in violations)),
-        final_mass_kg=float(X[-1, m] * units.mu_kg) if m is not None else None,
-        propellant_kg=float((X[0, m] - X[-1, m]) * units.mu_kg) if m is not None else None,
-        repropagation_miss=None, units=units.as_dict(), violations=violations,
+        repropagation_miss=None, violations=violations,
         iterations={"restore": 0, "homotopy": 0, "aul": 0, "ddp": 0, "newton": 0, "kkt": 0},
         runtime_s={"total": 0.0})
 
