@@ -161,7 +161,7 @@ class SolverOptions:
     Path constraints (``Problem.g_path``; ``path_constraints``, ``path_exchange``):
         path_exchange_rounds: after the solve, at most this many rounds of the exchange step:
             the dense DOP853 check finds where g_path rises above zero between a stage's
-            samples, those samples are tightened by 1.25 times the excess and the last
+            samples, those samples are tightened (``path_constraints.tightened``) and the last
             homotopy step is solved again from the solution (0: the samples alone; the
             dense margin is still reported, and a violation between them fails the solve).
     Homotopy (eq. 12-14):
