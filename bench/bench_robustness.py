@@ -129,6 +129,10 @@ def _summary(label: str, runs: list, args, fuel: bool, wall: float) -> None:
           f"CPU per solve median {statistics.median(cpu):.2f} s, max {max(cpu):.2f} s; wall "
           f"{wall:.0f} s")
     ref = PAPER.get(args.case) if fuel or args.case == "double_integrator" else None
+    for name, group in (("successes", ok), ("failures", [r for r in runs if not r["ok"]])):
+        if group:
+            times = [r["cpu_s"] for r in group]
+            print(f"  {name}: CPU median {statistics.median(times):.1f} s, max {max(times):.1f} s")
     if args.r_min_km:
         print(f"  keep-out r_min {args.r_min_km:g} km, window centred on {args.reference_kg}")
     print(f"  paper {ref if ref is not None else '-'}; converged optima (value: count): "

@@ -692,7 +692,7 @@ def test_a_cold_guess_newton_cannot_restore_falls_back_to_the_restored_ballistic
     lines.clear()
     solve(em_prob, np.full((em_prob.N, em_prob.nu), float(em.units.thrust(1e-6))),
           options=case_options(em, False, time_budget_s=5.0), progress=lines.append)
-    assert any("start restored by Newton" in line for line in lines)   # it stalls ...
+    assert any("start not restored by Newton" in line for line in lines)   # it stalls ...
     assert not any("ballistic" in line for line in lines)              # ... and is not repeated
 
 def test_a_newton_step_that_leaves_the_dynamics_domain_is_halved_not_the_end():
@@ -854,6 +854,53 @@ def test_a_feasible_iterate_whose_ddp_solve_ran_into_its_bound_gets_one_more_sol
     assert _ends_feasible(bound, feasible, True, opts)
     assert not _ends_feasible(bound, infeasible, True, opts)
     assert not _ends_feasible(done, float("nan"), False, opts)   # a NaN is never feasible
+
+
+def test_a_ddp_solve_whose_steps_stay_cut_short_without_progress_has_stalled():
+    """``ddp._crawling``: ddp_stall_iter steps in a row, each cut below ddp_stall_alpha of the
+    full step and each lowering the cost by less than tol_ddp, stop a DDP solve (the Lyapunov
+    harness's guesses 8, 16, 27 crawled 150-200 iterations at alpha ~ 1e-5); a shorter stretch
+    (guess 0's: 7 steps), a long step in between, or real progress does not."""
+    from daddy_core.solver.ddp import _crawling
+    opts = SolverOptions()
+    k = opts.ddp_stall_iter
+
+    def run(fractions, rel):
+        steps, J = [(1e8, 1.0)], 1e8
+        for f in fractions:
+            J *= 1.0 - rel
+            steps.append((J, f))
+        return steps
+
+    assert _crawling(run([7.6e-6] * k, 1e-6), opts)
+    assert _crawling(run([0.5] * 5 + [7.6e-6] * k, 1e-6), opts)   # the last k count
+    assert not _crawling(run([7.6e-6] * (k - 1), 1e-6), opts)       # too few to tell
+    assert not _crawling(run([7.6e-6] * (k // 2) + [0.5] + [7.6e-6] * (k // 2), 1e-6), opts)
+    assert not _crawling(run([7.6e-6] * k, 10 * opts.tol_ddp), opts)   # short but progressing
+    assert not _crawling(run([0.5] * k, 1e-6), opts)   # full steps: DDP's own test decides
+    assert not _crawling(run([7.6e-6] * k, 1e-6), SolverOptions(ddp_stall_iter=0))
+    # the trust-region retry of a failed line search: rejections after its first accepted step
+    # are steps of length zero; before it, the region is still shrinking to where the model holds
+    from daddy_core.solver.ddp import _rejected_crawl
+    shrinking = [(1e8, 1.0)]
+    assert not any(_rejected_crawl(shrinking, 1e8, True, opts) for _ in range(2 * k))
+    after_one = run([1e-7], 1e-7)   # with k - 1 rejections, k steps of no progress
+    calls = [_rejected_crawl(after_one, after_one[-1][0], True, opts) for _ in range(k - 1)]
+    assert calls == [False] * (k - 2) + [True]
+    assert not any(_rejected_crawl(run([1e-7], 1e-7), 1e8, False, opts) for _ in range(2 * k))
+
+
+def test_a_first_ddp_solve_that_leaves_an_infeasible_start_far_behind_has_diverged():
+    """``aul._diverged``: the first solve of an AUL loop diverged when both globalisations were
+    cut off and the max violation grew a hundredfold over an infeasible start's; a feasible
+    (restored) start, a smaller growth, or a solve that converged never count."""
+    from daddy_core.solver.aul import _diverged
+    opts = SolverOptions()
+    assert _diverged(358.0, 0.27, True, opts)           # Lyapunov guess 27
+    assert not _diverged(358.0, 0.27, False, opts)      # a globalisation converged
+    assert not _diverged(20.0, 0.27, True, opts)        # grew 74-fold
+    assert not _diverged(1e-4, 1e-11, True, opts)       # left a restored start: the penalty's trade
+    assert _diverged(float("inf"), 0.27, True, opts)
 
 
 def test_globalization_is_validated():

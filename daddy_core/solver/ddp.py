@@ -59,6 +59,7 @@ class Gains:
     dv1: float
     dv2: float
     clipped: int = 0   # stages whose step the trust region cut to its boundary
+    shortest: float = 1.0   # the smallest radius / unbounded step over the clipped stages
 
 
 # --------------------------------------------------------------------------- quadratic model
@@ -296,7 +297,7 @@ def backward_sweep(st: Stages, sweep: Sweep, rho: float,
     G[n, nx] = 1.0
     K = np.empty((N, nu, n + 1))    # Minv [Q_ux, Q_uu, Q_u] = -[b_k, ., a_k] of every stage
     Qu_rows = np.empty((N, nu, n + 1))   # [Q_ux, Q_uu, Q_u] of every stage, for dv1, dv2
-    clipped = 0
+    clipped, shortest = 0, 1.0
     radii = np.broadcast_to(np.asarray(radius, dtype=float), (N,)).tolist()
     for k in range(N - 1, -1, -1):
         radius = radii[k]
@@ -311,10 +312,11 @@ def backward_sweep(st: Stages, sweep: Sweep, rho: float,
             return None
         Qu_rows[k] = Qb[nx:n]
         Kk = np.matmul(Minv, Qb[nx:n], out=K[k])   # eq. 4-5: a_k = -Kk[:, n], b_k = -Kk[:, :nx]
-        if radius < math.inf and math.sqrt(Kk[:, n] @ Kk[:, n]) > radius:
+        if radius < math.inf and (full := math.sqrt(Kk[:, n] @ Kk[:, n])) > radius:
             Minv = _trust_region_inverse(Qb[nx:n, nx:n], Qb[nx:n, n], rho, radius)
             np.matmul(Minv, Qb[nx:n], out=Kk)
             clipped += 1
+            shortest = min(shortest, radius / full)
         if sweep is Sweep.Q:
             # Alg. 10: P_V,k = P_Q,k(dx, a_k + b_k dx)
             pv = da.compose(_quadratic_da(Qb[:n, n], Qb[:n, :n]),
@@ -331,7 +333,7 @@ def backward_sweep(st: Stages, sweep: Sweep, rho: float,
     Qu, Quu = Qu_rows[:, :, n], Qu_rows[:, :, nx:n]
     dv1 = np.einsum("ki,ki->", a, Qu)                       # sum_k a_k . Q_u,k
     dv2 = 0.5 * np.einsum("ki,ki->", a, np.einsum("kij,kj->ki", Quu, a))   # sum a.Q_uu.a / 2
-    return Gains(a, b, float(dv1), float(dv2), clipped)
+    return Gains(a, b, float(dv1), float(dv2), clipped, shortest)
 
 
 # ----------------------------------------------------------------------------- forward passes
@@ -602,6 +604,49 @@ def _trust_region_step(st: Stages, gains: Gains, dyn: bool, opts: SolverOptions,
     return None
 
 
+def _crawling(steps: list, opts: SolverOptions) -> bool:
+    """DDP has stalled: each of the last ``ddp_stall_iter`` steps (``steps``: the start's cost,
+    then (cost, fraction) after each step) was cut to less than ``ddp_stall_alpha`` of the full
+    step and lowered the cost by less than tol_ddp (relative): steps that DDP's own stopping
+    test would have called converged had they been full ones (a small decrease after a heavily
+    shortened step only says that the globalisation struggled).
+
+    The fraction is the line search's alpha; a trust-region step counts as 1 -- a step its
+    region cuts far below the Newton step is normal there (MEO->MEO's last fuel-optimal step,
+    delta = 1e-3: counted by its radius / full step, its trust-region solves stopped early and
+    the KKT polishing ended at 1.1e-3 instead of converging) -- except in the solve that
+    retries a failed line search (``ddp(retry=True)``): there it is the smallest radius / full
+    step of a stage (``Gains.shortest``), and a rejected step after the first accepted one is
+    a step of length zero (``_rejected_crawl``). That solve is the last resort before the AUL
+    judges the start (``aul._diverged``).
+
+    Why: Lyapunov L1->L2 fuel from random guesses (the robustness harness, seed 0): guesses 8,
+    16 and 27 took the thrust 25-90x past its bound in their first steps (the 1e10 terminal
+    weight against a penalty of 1), into regions where the line search accepted only
+    alpha ~ 1e-5: 150-180 iterations at 1e-6-3e-5 relative decrease each, 25-40 s, before
+    ddp_max_iter handed the solve to the trust region; there guess 16's radius fell to 1e-7 of
+    the full step, 13 steps lowered the cost by ~1e-7 (relative) each and every later one was
+    rejected: 200 iterations, 100 s. The successes' short-step stretches (guess 0's last
+    homotopy step: alpha 3e-5-1e-3 for 7 steps, then back to 0.5) end well within 20."""
+    k = opts.ddp_stall_iter
+    if k <= 0 or len(steps) <= k:
+        return False
+    return all(fraction < opts.ddp_stall_alpha
+               and before - after < opts.tol_ddp * max(abs(before), 1e-300)
+               for (before, _), (after, fraction) in zip(steps[-k - 1:-1], steps[-k:]))
+
+
+def _rejected_crawl(steps: list, J: float, retry: bool, opts: SolverOptions) -> bool:
+    """A rejected step of the retry (``ddp(retry=True)``) after its first accepted one counts
+    as a step of length zero (appended to ``steps``) for ``_crawling``; before it, the
+    rejections are the region shrinking from its unbounded first step to where the model
+    holds (40 in a row on the Lyapunov harness's guess 27 before its first accepted step)."""
+    if not retry or len(steps) < 2:
+        return False
+    steps.append((J, 0.0))
+    return _crawling(steps, opts)
+
+
 def _max_step(gains: Gains) -> float:
     """The largest stage step |a_k| of a sweep."""
     return float(np.sqrt(np.max(np.einsum("ki,ki->k", gains.a, gains.a))))
@@ -677,7 +722,7 @@ class _StepControl:
 
 def ddp(st: Stages, method: Method, opts: SolverOptions, stats: DDPStats,
         deadline: float | None = None, rho0: float | None = None,
-        radius0: float = math.inf) -> DDPResult:
+        radius0: float = math.inf, retry: bool = False) -> DDPResult:
     """Alg. 3: iterate backward sweep + forward pass until the relative cost decrease is small.
 
     Globalisation (``_StepControl``): the line search accepts a step when actual / expected
@@ -688,12 +733,16 @@ def ddp(st: Stages, method: Method, opts: SolverOptions, stats: DDPStats,
     bounds every stage's step and accepts the full step when the reduction ratio is near 1; a
     rejected step shrinks the region and sweeps again on the same expansions. rho0: the Quu
     regularisation to start from (default opts.rho_init);
-    radius0: the trust-region radius to start from.
+    radius0: the trust-region radius to start from; retry: this solve retries one whose line
+    search failed (``aul._trust_region_fallback``), so a step its trust region cuts far below
+    the full step counts towards the stall test as a short line-search step does, and a
+    rejected one as a step of length zero (``_crawling``, ``_rejected_crawl``).
     """
     p = st.problem
     ctl = _StepControl(opts, method.dyn, opts.rho_init if rho0 is None else rho0, radius=radius0)
     J = st.cost
     last = None
+    steps = [(J, 1.0)]   # the start's cost, then (cost, step fraction) after each accepted step
 
     def result(converged, iterations, status):
         return DDPResult(converged, iterations, status, st, ctl.rho, last, ctl.radius)
@@ -716,6 +765,8 @@ def ddp(st: Stages, method: Method, opts: SolverOptions, stats: DDPStats,
         if isinstance(step, Blame):
             # those stages' steps are bounded now: sweep again on the same expansions (an
             # iteration of ddp_max_iter, as a trust region's rejected step is)
+            if _rejected_crawl(steps, J, retry, opts):
+                return result(False, it, Status.DDP_STALLED)
             continue
         if step is None:
             # the whole line search found no step that its model predicts, for a step worth
@@ -728,6 +779,8 @@ def ddp(st: Stages, method: Method, opts: SolverOptions, stats: DDPStats,
                 return result(True, it - 1, Status.DDP_NOTHING_TO_GAIN)
             if (stop := ctl.rejected(st, gains)) is not None:
                 return result(False, it, stop)
+            if _rejected_crawl(steps, J, retry, opts):
+                return result(False, it, Status.DDP_STALLED)
             continue
         stats.iterations += 1
         stats.stages_total += p.N
@@ -740,10 +793,13 @@ def ddp(st: Stages, method: Method, opts: SolverOptions, stats: DDPStats,
         rel = (J - step.cost) / max(abs(J), 1e-300)
         J = st.cost
         ctl.accepted(step)
+        steps.append((J, step.alpha * (gains.shortest if retry else 1.0)))
         # converged when the decrease is small for a (nearly) full step: a small decrease after a
         # heavily shortened step only says the globalisation struggled (and a step the trust
         # region cut says nothing of the full one)
         if (it >= opts.ddp_min_iter and 0.0 <= rel < opts.tol_ddp and not gains.clipped
                 and (step.alpha >= 0.5 or full_step_gain < opts.tol_ddp)):
             return result(True, it, Status.DDP_CONVERGED)
+        if _crawling(steps, opts):
+            return result(False, it, Status.DDP_STALLED)
     return result(False, opts.ddp_max_iter, Status.DDP_MAX_ITER)

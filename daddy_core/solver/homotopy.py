@@ -33,6 +33,9 @@ class HomotopyResult:
         converged: every step met tol_aul or stalled (``Status.AUL_STALLED``: the polishing
             decides); reason: the first step that did neither, and why.
         stalled: the first step whose AUL stalled, and at what (empty if none).
+        diverged: a step's first DDP solve diverged (``Status.AUL_DIVERGED``): X, U are that
+            step's start, where DDP could not converge (no polishing follows: the solve
+            reports the divergence).
     """
 
     X: np.ndarray
@@ -46,6 +49,7 @@ class HomotopyResult:
     converged: bool = True
     reason: str = "converged"
     stalled: str = ""
+    diverged: bool = False
 
 
 def homotopy_steps(problem: Problem, U0: np.ndarray, opts: SolverOptions,
@@ -102,7 +106,6 @@ def continuation(problem: Problem, X, U, steps: tuple, method: Method, opts: Sol
         st = (Stages(problem, X, U, mult, hom, opts.eps_da, F=F) if res is None
               else res.stages.with_costs(mult, hom))
         res = aul(st, method, opts, stats, deadline, progress, rho0=rho)
-        opts = res.opts   # aul's trust-region fallback, with its ratio tolerance, stays
         gains = res.gains or gains
         aul_iterations += res.iterations
         mult = res.mult
@@ -124,7 +127,8 @@ def continuation(problem: Problem, X, U, steps: tuple, method: Method, opts: Sol
                                   f"{res.max_violation:.2e})")
         elif not res.converged:
             converged, reason = False, f"homotopy step {i + 1}: {res.reason}"
-            if res.status is Status.TIME_BUDGET:
+            if res.status in (Status.TIME_BUDGET, Status.AUL_DIVERGED):
                 break
     return HomotopyResult(best[0], best[1], res.stages, mult, gains, res.rho, aul_iterations,
-                          history, converged, reason, stalled)
+                          history, converged, reason, stalled,
+                          res.status is Status.AUL_DIVERGED)

@@ -68,6 +68,13 @@ class SolverOptions:
         ddp_min_iter: iterations before the tol_ddp test applies (the reference: 3; a warm
             start from a converged solution can stop after 1).
         ddp_max_iter: iteration bound of one DDP solve.
+        ddp_stall_iter, ddp_stall_alpha: DDP has stalled (``Status.DDP_STALLED``) when
+            ddp_stall_iter steps in a row were each shorter than ddp_stall_alpha of the full step
+            (the line search's alpha; in the trust-region retry of a failed line search, the
+            region's radius / step, a rejected step counting as zero) and lowered the cost by
+            less than tol_ddp (relative): the model holds along a vanishing fraction of each
+            step, and the iteration bound would be spent crawling (``ddp._crawling``: the
+            measurement). 0 turns the test off.
         ddp_stop_on_prediction: also stop DDP, before the forward pass, when the backward
             sweep predicts a relative decrease below ddp_predicted_stop_fraction * tol_ddp for
             the full step (after ddp_min_iter iterations) and the constraints meet tol_aul; a
@@ -94,9 +101,9 @@ class SolverOptions:
             sweep runs again, instead of one shorter step length (or a smaller region) for
             every stage; an accepted step that a bound held back grows that bound by
             (1 + tr_kappa).
-        tr_fallback: with the line search, a DDP solve that runs into ddp_max_iter is solved
-            again from its start with the trust region, which the rest of the solve keeps
-            (``aul._trust_region_fallback``: why, and its ratio tolerance).
+        tr_fallback: with the line search, a DDP solve that runs into ddp_max_iter (or stalls)
+            is solved again from its start with the trust region, which the rest of that
+            homotopy step keeps (``aul._trust_region_fallback``: why, and its ratio tolerance).
         tr_ratio_tol, tr_kappa: the trust region accepts a step when |actual / expected - 1|
             <= tr_ratio_tol and then grows its radius by (1 + tr_kappa), else shrinks it by
             (1 - tr_kappa) and sweeps again on the same expansions (PDDP's Table 2: 0.1, 0.25;
@@ -215,6 +222,8 @@ class SolverOptions:
     polish_from_ddp_maps: bool = False
     ddp_max_iter: int = 200
     ddp_min_iter: int = 3
+    ddp_stall_iter: int = 20
+    ddp_stall_alpha: float = 1e-3
     ddp_stop_on_prediction: bool = False
     ddp_predicted_stop_fraction: float = 0.1
     aul_max_iter: int = 40

@@ -20,10 +20,14 @@ class Status(Enum):
     DDP_NOTHING_TO_GAIN = ("no step accepted where the full step's predicted decrease is below "
                            "tol_ddp")
     TRUST_REGION_COLLAPSED = "trust region shrank to round-off"
+    DDP_STALLED = ("stalled: ddp_stall_iter steps in a row shorter than ddp_stall_alpha of "
+                   "the full step, each lowering the cost by less than tol_ddp")
     # augmented Lagrangian
     AUL_CONVERGED = "max violation below tol_aul"
     AUL_MAX_ITER = "aul_max_iter reached"
     AUL_STALLED = "max violation stalled with the penalty at mu_max"
+    AUL_DIVERGED = ("DDP diverged from the start: neither the line search nor the trust "
+                    "region converged, and the max violation grew a hundredfold")
     # Newton
     NEWTON_CONVERGED = "active constraints below tol_newton"
     NEWTON_MAX_ITER = "newton_max_iter reached"

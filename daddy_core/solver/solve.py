@@ -253,7 +253,8 @@ def _warm_start(problem: Problem, U0, warm: WarmStart, opts: SolverOptions, cloc
         else:   # DDP starts from the guess, where Newton's first model expanded the stages
             start.F = res.start_F
         if progress:
-            progress(f"start restored by Newton{' (without g_path)' if relaxed else ''}: "
+            progress(f"start {'restored' if res.converged else 'not restored'} by Newton"
+                     f"{' (without g_path)' if relaxed else ''}: "
                      f"{res.iterations} iterations, max violation {res.max_violation:.2e} "
                      f"({res.reason})")
     clock.lap("restore", t0)
@@ -325,7 +326,7 @@ def _finish(problem: Problem, hres: HomotopyResult, start: _Start, polish: bool,
     untouched = (start.restored is not None and np.array_equal(end.X, start.restored.X)
                  and np.array_equal(end.U, start.restored.U))
     t0 = time.perf_counter()
-    if polish and not fallback and not untouched:
+    if polish and not fallback and not untouched and not hres.diverged:
         # fresh expansions unless asked otherwise (see SolverOptions.polish_from_ddp_maps)
         res = newton.polish(problem, end.X, end.U, opts, clock.deadline,
                             maps=end.maps if opts.polish_from_ddp_maps else None)
