@@ -693,7 +693,7 @@ def test_a_cold_guess_newton_cannot_restore_falls_back_to_the_restored_ballistic
     solve(em_prob, np.full((em_prob.N, em_prob.nu), float(em.units.thrust(1e-6))),
           options=case_options(em, False, time_budget_s=5.0), progress=lines.append)
     assert any("start not restored by Newton" in line for line in lines)   # it stalls ...
-    assert not any("ballistic" in line for line in lines)              # ... and is not repeated
+    assert not any("ballistic" in line for line in lines)   # ... and is not repeated
 
 def test_a_newton_step_that_leaves_the_dynamics_domain_is_halved_not_the_end():
     """Newton's step from x = 4 towards sqrt(x_N) = 0.05 overshoots to x_N < 0, where the
@@ -901,6 +901,28 @@ def test_a_first_ddp_solve_that_leaves_an_infeasible_start_far_behind_has_diverg
     assert not _diverged(20.0, 0.27, True, opts)        # grew 74-fold
     assert not _diverged(1e-4, 1e-11, True, opts)       # left a restored start: the penalty's trade
     assert _diverged(float("inf"), 0.27, True, opts)
+
+
+@pytest.mark.slow
+def test_a_solve_that_diverges_from_a_random_guess_says_so_and_returns_its_start():
+    """Lyapunov L1->L2 fuel from the robustness harness's guess 27 (seed 0: uniform directions,
+    magnitudes up to the bound): its first DDP solve stalls under the line search and under
+    the trust region with the thrust hundreds of times its bound; the solve ends there
+    (``Status.AUL_DIVERGED``; 28-44 s where it used to run into any time cap) and returns the
+    start, finite, with the reason -- not the diverged iterate, not a polished one."""
+    case = load_case("lyapunov_l1_l2")
+    prob = problem_from_case(case)
+    rng = np.random.default_rng(0)
+    for _ in range(28 - 2):   # (bench_robustness.guesses: two fixed guesses, then random ones)
+        d = rng.normal(size=(prob.N, prob.nu))
+        d /= np.linalg.norm(d, axis=1, keepdims=True)
+        U0 = d * rng.uniform(0.0, 1.0, size=(prob.N, 1)) * prob.u_max
+    sol = solve(prob, U0, options=case_options(case, True))
+    assert not sol.converged
+    assert "DDP diverged from the start" in sol.reason, sol.reason
+    assert np.all(np.isfinite(sol.X)) and np.all(np.isfinite(sol.U))
+    assert sol.max_violation < 1.0   # the start (0.27), not the diverged iterate (~300)
+    assert sol.iterations["newton"] == 0
 
 
 def test_globalization_is_validated():
