@@ -179,8 +179,7 @@ def aul(st: Stages, method: Method, opts: SolverOptions, stats: DDPStats,
     DDP solve diverged (``_diverged``: the loop then returns its start)."""
     problem, mult, hom = st.problem, st.mult, st.hom
     gains = None
-    g, ni, gt, nti = problem.constraint_values(st.X, st.U)
-    gmax = gmax_start = largest(max_violation(g, ni), max_violation(gt, nti))
+    gmax = np.inf
     start = st
     rho, rho_last = rho0, opts.rho_init if rho0 is None else rho0
     radius = math.inf
@@ -209,10 +208,12 @@ def aul(st: Stages, method: Method, opts: SolverOptions, stats: DDPStats,
                      f"cost {st.cost:.6e}, max violation {gmax:.2e}")
         if deadline is not None and time.perf_counter() > deadline:
             return AULResult(False, it, Status.TIME_BUDGET, st, mult, gmax, rho_last, gains)
-        if it == 1 and _diverged(gmax, gmax_start, both_cut_off, opts):
-            # (the start, the less violating point, is what the loop returns)
-            return AULResult(False, it, Status.AUL_DIVERGED, start, mult, gmax_start, rho_last,
-                             gains)
+        if it == 1 and both_cut_off:   # (the start's violation is needed only here)
+            gmax_start = problem.violation(start.X, start.U)
+            if _diverged(gmax, gmax_start, both_cut_off, opts):
+                # (the start, the less violating point, is what the loop returns)
+                return AULResult(False, it, Status.AUL_DIVERGED, start, mult, gmax_start,
+                                 rho_last, gains)
         if _ends_feasible(res, gmax, cut_off, opts):
             return AULResult(True, it, Status.AUL_CONVERGED, st, mult, gmax, rho_last, gains)
         cut_off = gmax <= opts.tol_aul   # (feasible and not ended: DDP ran into its bound)
