@@ -56,6 +56,32 @@ def test_kkt_polishing_returns_to_the_optimum_feasible_and_never_costlier():
     assert res.optimality.kkt_residual <= 1e-8
 
 
+def test_a_kkt_step_that_cannot_be_flown_refuses_its_shift_not_the_polishing(monkeypatch):
+    """A KKT step whose point the stage integration cannot fly (on a small LEO raise the
+    unshifted step took p below zero and rk78 raised) is refused like a step whose model
+    failed: the next shift's shorter step is tried, and the polishing goes on from the point
+    it reaches, feasible and cheaper (it stopped with "no KKT step lowered the cost")."""
+    from daddy_core.errors import DaddyError
+    from daddy_core.solver import kkt_polish as kp
+    prob, sol = _di_optimum()
+    X2, U2 = _feasible_detour(prob, sol.U, 5e-2)
+    start = optimality(prob, X2, U2, HOM)
+    restore, calls = kp._restore, []
+
+    def unflyable_first(problem, model, X, U, *args):
+        calls.append(1)
+        if len(calls) == 1:
+            raise DaddyError("rk78: dynamics returned NaN or inf")
+        return restore(problem, model, X, U, *args)
+
+    monkeypatch.setattr(kp, "_restore", unflyable_first)
+    res = kkt_polish(prob, X2, U2, HOM, SolverOptions(tol_optimality=1e-8, kkt_max_iter=5), start)
+    assert len(calls) >= 2                                  # a larger shift was tried
+    assert res.iterations >= 1 and prob.violation(res.X, res.U) <= 1e-10
+    assert objective(prob, res.X, res.U, HOM) < objective(prob, X2, U2, HOM)
+    assert res.optimality.kkt_residual < start.kkt_residual
+
+
 def test_infinite_tolerance_neither_evaluates_nor_polishes():
     prob = problem_from_case(DI)
     sol = solve(prob, np.zeros((prob.N, 3)),

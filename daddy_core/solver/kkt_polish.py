@@ -129,15 +129,12 @@ def _iteration(problem: Problem, X, U, hom, f: float, model: ConstraintModel,
         predicted = -(c @ dY + 0.5 * (dY @ (H @ dY)))
         if not predicted > 0:
             continue   # no descent on the model (negative curvature along the step): shift more
-        # the cost alone at Y + dY against its own quadratic model: a step that leaves the
-        # region where the cost is quadratic (e.g. a coasting control across the kink of the
-        # fuel cost) is refused before the costly restoration
         Xt, Ut = model.apply(dY)
         cost_model = c @ dY + 0.5 * (dY @ (Hf @ dY))
-        if not abs(objective(problem, Xt, Ut, hom) - f - cost_model) \
-                <= opts.kkt_cost_slack * predicted:
+        res = _trial(problem, model, Xt, Ut, hom, f + cost_model, opts.kkt_cost_slack * predicted,
+                     restore_opts, deadline, maps)
+        if res is None:
             continue
-        res = _restore(problem, model, Xt, Ut, restore_opts, deadline, maps)
         newton_its += res.iterations
         if not res.converged:
             continue
@@ -148,6 +145,25 @@ def _iteration(problem: Problem, X, U, hom, f: float, model: ConstraintModel,
         if deadline is not None and time.perf_counter() > deadline:
             break
     return None
+
+
+def _trial(problem: Problem, model: ConstraintModel, X, U, hom, cost_model: float,
+           slack: float, opts: SolverOptions, deadline, maps: StageMaps) -> NewtonResult | None:
+    """The restoration (``_restore``) of the KKT step's point (X, U), or None when the step is
+    refused: its cost misses ``cost_model`` (the cost's own quadratic model there) by more than
+    ``slack`` -- the step left the region where the cost is quadratic (e.g. a coasting control
+    across the kink of the fuel cost), refused before the costly restoration -- or the point
+    cannot be flown. The smallest shifts' long steps can leave the elements' domain (p < 0 on a
+    small LEO raise, KKT residual 1.35: the stage integration raised, and the whole polishing
+    stopped with "no KKT step lowered the cost" before any larger shift was tried); a larger
+    shift then takes a shorter step. numpy's warnings on such a point would only be noise."""
+    with np.errstate(invalid="ignore", over="ignore", divide="ignore"):
+        try:
+            if not abs(objective(problem, X, U, hom) - cost_model) <= slack:
+                return None
+            return _restore(problem, model, X, U, opts, deadline, maps)
+        except (DaddyError, ArithmeticError, ValueError, np.linalg.LinAlgError):
+            return None
 
 
 def _restore(problem: Problem, model: ConstraintModel, X, U, opts: SolverOptions, deadline,
