@@ -26,7 +26,8 @@ convergence linear):
     entry): from the level the last iteration ended on, a shift is refused when the KKT
     system is singular, the model predicts no decrease, or the cost at Y + dY misses its own
     quadratic model by more than ``kkt_cost_slack`` predicted decreases (the step left the region
-    where the cost is quadratic, e.g. a coasting control across the kink of the fuel cost);
+    where the cost is quadratic, e.g. a coasting control across the kink of the fuel cost) or
+    its point cannot be flown (``_trial``);
     else the step is restored to feasibility (``_restore``) and kept when the cost fell by at
     least a tenth of the prediction. A step that delivered three quarters of it lowers the
     next iteration's level by one. No shift kept: the polishing stops.
