@@ -154,10 +154,11 @@ def _trial(problem: Problem, model: ConstraintModel, X, U, hom, cost_model: floa
     refused: its cost misses ``cost_model`` (the cost's own quadratic model there) by more than
     ``slack`` -- the step left the region where the cost is quadratic (e.g. a coasting control
     across the kink of the fuel cost), refused before the costly restoration -- or the point
-    cannot be flown. The smallest shifts' long steps can leave the elements' domain (p < 0 on a
-    small LEO raise, KKT residual 1.35: the stage integration raised, and the whole polishing
-    stopped with "no KKT step lowered the cost" before any larger shift was tried); a larger
-    shift then takes a shorter step. numpy's warnings on such a point would only be noise."""
+    cannot be flown. The smallest shifts' long steps can leave the elements' domain (NaN from a
+    square root in the dynamics on a small LEO raise, KKT residual 1.35: the stage integration
+    raised, and the whole polishing stopped with "no KKT step lowered the cost" before any
+    larger shift was tried); a larger shift then takes a shorter step. numpy's warnings on such
+    a point would only be noise."""
     with np.errstate(invalid="ignore", over="ignore", divide="ignore"):
         try:
             if not abs(objective(problem, X, U, hom) - cost_model) <= slack:
