@@ -387,7 +387,7 @@ def _resolve(problem: Problem, hres: HomotopyResult, end: _End, hom: tuple, meth
              progress) -> tuple[HomotopyResult, _End]:
     """The last homotopy step ``hom`` solved again (AUL + DDP, Newton, KKT polishing) from
     the KKT-polished end with its least-squares KKT multipliers; the new end is kept when it
-    is feasible with a smaller KKT residual, else the old one (the work is counted either way).
+    improves on it (``_improves``), else the old one (the work is counted either way).
 
     Why: the AUL ends a homotopy step when DDP meets its relative-decrease test with the
     constraints met, which on a flat stretch of the fuel cost happens far from stationarity
@@ -413,12 +413,22 @@ def _resolve(problem: Problem, hres: HomotopyResult, end: _End, hom: tuple, meth
     new.restore_iterations = end.restore_iterations
     counted = dict(aul_iterations=hres.aul_iterations + again.aul_iterations,
                    history=hres.history + [dict(h, resolve=True) for h in again.history])
-    if not (new.converged and new.optimality is not None
-            and new.optimality.kkt_residual < end.optimality.kkt_residual):
+    if not _improves(problem, hom, new, end):
         end.newton_iterations, end.kkt_iterations = new.newton_iterations, new.kkt_iterations
         return replace(hres, **counted), end
     return replace(again, gains=again.gains or hres.gains, converged=hres.converged,
                    reason=hres.reason, stalled=hres.stalled, **counted), new
+
+
+def _improves(problem: Problem, hom: tuple, new: _End, old: _End) -> bool:
+    """A re-solved end (``_resolve``) replaces the KKT-polished one when it is feasible with a
+    smaller KKT residual at no higher cost (the objective at ``hom``). The residual alone is not
+    enough far from a KKT point: LEO->LEO fuel's re-solve ended at a cost of 29.21 (956.80 kg)
+    where the polished end's was below the last AUL solve's 27.64 (the polishing only lowers
+    it), and replaced it for a residual of 1.45 against 1.57."""
+    return (new.converged and new.optimality is not None
+            and new.optimality.kkt_residual < old.optimality.kkt_residual
+            and objective(problem, new.X, new.U, hom) <= objective(problem, old.X, old.U, hom))
 
 
 def _assemble(problem: Problem, end: _End, hres: HomotopyResult, steps: tuple, method: Method,
