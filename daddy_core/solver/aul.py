@@ -183,8 +183,9 @@ def aul(st: Stages, method: Method, opts: SolverOptions, stats: DDPStats,
     below tol_aul (``_ends_feasible``; final: the solve's last homotopy step, whose solution is
     the answer, not an intermediate one's). rho0: Quu regularisation to start from (None:
     opts.rho_init); with opts.carry_rho each DDP solve resumes from the previous one's (the
-    trust-region radius always does). Stops early when the penalty can do no more (``_stalled``) or when its first
-    DDP solve diverged (``_diverged``: the loop then returns its start)."""
+    trust-region radius always does). Stops early when the penalty can do no more
+    (``_stalled``) or when its first DDP solve diverged (``_diverged``: the loop then returns
+    its start)."""
     problem, mult, hom = st.problem, st.mult, st.hom
     gains = None
     gmax = np.inf
