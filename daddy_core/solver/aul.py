@@ -123,18 +123,12 @@ def _trust_region_fallback(res, opts: SolverOptions) -> bool:
             and opts.globalization is Globalization.LINE_SEARCH)
 
 
-def _ends_feasible(res, gmax: float, after_cut_off: bool, opts: SolverOptions,
-                   final: bool = True) -> bool:
+def _ends_feasible(res, gmax: float, after_cut_off: bool, opts: SolverOptions) -> bool:
     """A feasible iterate ends the augmented Lagrangian when its DDP solve ended on its own
     stopping test -- or when the solve before it (``after_cut_off``) also ran into its
-    iteration bound at a feasible point, or when the loop solves an intermediate homotopy step
-    (not ``final``). Alg. 4 stops on the violation alone, its inner solves assumed converged; a
-    solve cut off by its bound is not optimal, so the loop of the final step gives DDP one more
-    solve from there, under the updated multipliers. An intermediate step's solution is only
-    the next step's start, solved from there to that step's own end; making it optimal first
-    cost many-revolution fuel solves most of their time: a small LEO raise's step 3 of 4 met
-    the constraints (2e-11) after 6 AUL iterations at 136 s and then ran 5 more DDP solves of
-    200 iterations each to 259 s (the full LEO: 5 such solves after its first feasible one).
+    iteration bound at a feasible point. Alg. 4 stops on the violation alone, its inner solves
+    assumed converged; a solve cut off by its bound is not optimal, so the loop gives DDP one
+    more solve from there, under the updated multipliers.
 
     Why: DRO->DRO over three revolutions from a restored start, last homotopy step (delta =
     1e-4): the trust region's DDP ran its 200 iterations to a feasible point, the loop stopped
@@ -146,7 +140,7 @@ def _ends_feasible(res, gmax: float, after_cut_off: bool, opts: SolverOptions,
     340 s instead of 141 for the same 925.207 kg, still unconverged after the KKT polishing."""
     if not gmax <= opts.tol_aul:   # (NaN: not feasible, as Alg. 4's test before this one)
         return False
-    return res.status not in _CUT_OFF or after_cut_off or not final
+    return res.status not in _CUT_OFF or after_cut_off
 
 
 # the first DDP solve diverged when its max violation grew this many times over the start's
@@ -176,16 +170,13 @@ def _diverged(gmax: float, gmax_start: float, both_cut_off: bool, opts: SolverOp
 
 
 def aul(st: Stages, method: Method, opts: SolverOptions, stats: DDPStats,
-        deadline: float | None = None, progress=None, rho0: float | None = None,
-        final: bool = True) -> AULResult:
+        deadline: float | None = None, progress=None, rho0: float | None = None) -> AULResult:
     """Alg. 4 from the expanded nominal ``st`` (its multipliers and homotopy point): DDP on the
     augmented cost, multiplier and penalty updates, until the maximum constraint violation is
-    below tol_aul (``_ends_feasible``; final: the solve's last homotopy step, whose solution is
-    the answer, not an intermediate one's). rho0: Quu regularisation to start from (None:
-    opts.rho_init); with opts.carry_rho each DDP solve resumes from the previous one's (the
-    trust-region radius always does). Stops early when the penalty can do no more
-    (``_stalled``) or when its first DDP solve diverged (``_diverged``: the loop then returns
-    its start)."""
+    below tol_aul. rho0: Quu regularisation to start from (None: opts.rho_init); with
+    opts.carry_rho each DDP solve resumes from the previous one's (the trust-region radius
+    always does). Stops early when the penalty can do no more (``_stalled``) or when its first
+    DDP solve diverged (``_diverged``: the loop then returns its start)."""
     problem, mult, hom = st.problem, st.mult, st.hom
     gains = None
     gmax = np.inf
@@ -223,7 +214,7 @@ def aul(st: Stages, method: Method, opts: SolverOptions, stats: DDPStats,
                 # (the start, the less violating point, is what the loop returns)
                 return AULResult(False, it, Status.AUL_DIVERGED, start, mult, gmax_start,
                                  rho_last, gains)
-        if _ends_feasible(res, gmax, cut_off, opts, final):
+        if _ends_feasible(res, gmax, cut_off, opts):
             return AULResult(True, it, Status.AUL_CONVERGED, st, mult, gmax, rho_last, gains)
         cut_off = gmax <= opts.tol_aul   # (feasible and not ended: DDP ran into its bound)
         history.append(gmax)

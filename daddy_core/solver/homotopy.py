@@ -105,8 +105,7 @@ def continuation(problem: Problem, X, U, steps: tuple, method: Method, opts: Sol
         mult.mu_t[...] = opts.mu_init
         st = (Stages(problem, X, U, mult, hom, opts.eps_da, F=F) if res is None
               else res.stages.with_costs(mult, hom))
-        res = aul(st, method, opts, stats, deadline, progress, rho0=rho,
-                  final=i + 1 == len(steps))
+        res = aul(st, method, opts, stats, deadline, progress, rho0=rho)
         gains = res.gains or gains
         aul_iterations += res.iterations
         mult = res.mult
