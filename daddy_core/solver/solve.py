@@ -423,9 +423,10 @@ def _resolve(problem: Problem, hres: HomotopyResult, end: _End, hom: tuple, meth
 def _improves(problem: Problem, hom: tuple, new: _End, old: _End) -> bool:
     """A re-solved end (``_resolve``) replaces the KKT-polished one when it is feasible with a
     smaller KKT residual at no higher cost (the objective at ``hom``). The residual alone is not
-    enough far from a KKT point: LEO->LEO fuel's re-solve ended at a cost of 29.21 (956.80 kg)
-    where the polished end's was below the last AUL solve's 27.64 (the polishing only lowers
-    it), and replaced it for a residual of 1.45 against 1.57."""
+    enough far from a KKT point: a LEO->LEO fuel re-solve (1800 s, with a homotopy change since
+    reverted) ended at a cost of 29.21 (956.80 kg) where the polished end's was below the last
+    AUL solve's 27.64 (the polishing only lowers it), and replaced it for a residual of 1.45
+    against 1.57."""
     return (new.converged and new.optimality is not None
             and new.optimality.kkt_residual < old.optimality.kkt_residual
             and objective(problem, new.X, new.U, hom) <= objective(problem, old.X, old.U, hom))
