@@ -59,9 +59,9 @@ def test_kkt_polishing_returns_to_the_optimum_feasible_and_never_costlier():
 def test_a_kkt_step_that_cannot_be_flown_refuses_its_shift_not_the_polishing(monkeypatch):
     """A KKT step whose point the stage integration cannot fly (on a small LEO raise a lightly
     shifted step left the elements' domain, NaN from a square root in the dynamics, and rk78
-    raised) is refused like a step whose model
-    failed: the next shift's shorter step is tried, and the polishing goes on from the point
-    it reaches, feasible and cheaper (it stopped with "no KKT step lowered the cost")."""
+    raised) is refused like a step whose model failed: the next shift's shorter step is tried,
+    and the polishing goes on from the point it reaches, feasible and cheaper (it stopped with
+    "no KKT step lowered the cost")."""
     from daddy_core.errors import DaddyError
     from daddy_core.solver import kkt_polish as kp
     prob, sol = _di_optimum()
