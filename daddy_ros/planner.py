@@ -265,9 +265,11 @@ class GuidancePlanner:
     # ------------------------------------------------------------------ nominal plans
     def load_plan(self, path: str | Path, epoch_s: float) -> Plan:
         """Adopt a stored solution (JSON) as the plan starting at epoch_s. Warm re-plans then
-        optimise the cost that solution was optimised for (its last homotopy step, when it is
-        fuel-optimal like the planner), not the case's current last step: re-planning a plan for
-        another cost re-shapes it in flight, and the closed loop loses arrival margin."""
+        optimise the cost that solution was optimised for (its last pseudo-Huber step,
+        ``Solution.fuel_step``, when it is fuel-optimal like the planner; the case's last step
+        for a plan whose exact fuel end game ran from the energy step), not the case's current
+        last step: re-planning a plan for another cost re-shapes it in flight, and the closed
+        loop loses arrival margin."""
         sol = Solution.from_json(path)
         if sol.U.shape[0] != self.base_problem.N:
             raise DaddyError(f"plan file {path} has {sol.U.shape[0]} stages, scenario has "
@@ -280,9 +282,8 @@ class GuidancePlanner:
                                  f"the nodes by {-margin * self.units.lu_km:.3f} km (dense "
                                  "re-propagation)")
             sol.min_path_margin = margin
-        last = sol.history[-1] if sol.history else {}
-        if self.config.fuel_optimal and sol.fuel_optimal and "h" in last and "delta" in last:
-            self.policy = self.policy.with_warm(homotopy=((last["h"], last["delta"]),))
+        if self.config.fuel_optimal and sol.fuel_optimal and sol.fuel_step:
+            self.policy = self.policy.with_warm(homotopy=(sol.fuel_step,))
         return self._adopt_solution(sol, epoch_s, "nominal")
 
     def _adopt_solution(self, sol: Solution, epoch_s: float, request_id: str) -> Plan:

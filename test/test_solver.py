@@ -799,7 +799,7 @@ def test_each_homotopy_step_starts_from_the_multipliers_estimated_at_the_last_so
     case = load_case("halo_l2_l1")
     prob = problem_from_case(case)
     sol = solve(prob, np.full((prob.N, 3), float(case.units.thrust(1e-6))), fuel_optimal=True,
-                options=case_options(case, True))
+                options=case_options(case, True, exact_fuel=False))   # (the whole homotopy)
     assert sol.converged, sol.reason
     assert sol.history[-1]["aul_iterations"] <= 3, [h["aul_iterations"] for h in sol.history]
     assert sol.final_mass_kg == pytest.approx(973.941, abs=2e-3)

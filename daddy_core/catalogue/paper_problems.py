@@ -4,12 +4,13 @@ dry-mass bounds, and the normalisation units."""
 from __future__ import annotations
 
 import math
+from dataclasses import dataclass
 
 import numpy as np
 
 from ..da import functions as dm
 from ..errors import DaddyError
-from ..fuel import pseudo_huber_stage_cost
+from ..fuel import FuelStageCost, pseudo_huber_stage_cost
 from ..problem import Problem, flow_step
 from .cases import Case
 
@@ -49,18 +50,30 @@ def _orbit_miss(x, xt):
                      (x[5] - xt[5]) * (1.0 / xt[5])])
 
 
-def sundman_stage_cost(stage_cost, gm: float):
-    """A stage cost written for stage durations, on stages of true longitude: the duration of a
-    stage of angle dL is taken as dL p^(3/2) / sqrt(gm), exact on a circular orbit (dt/dL =
+@dataclass(frozen=True)
+class SundmanStageCost(FuelStageCost):
+    """A fuel stage cost written for stage durations, on stages of true longitude: the duration
+    of a stage of angle dL is taken as dL p^(3/2) / sqrt(gm), exact on a circular orbit (dt/dL =
     r^2 / sqrt(gm p)); on an eccentric one the weighting is off by the factor (1 + e cos nu)^-2
     of the stage, which leaves the dynamics, the mass and the constraints exact and weights
     thrust along the orbit slightly differently than propellant does."""
-    inv_sqrt_gm = gm ** -0.5
 
-    def cost(x, u, dL, hom=(0.0, 1.0)):
-        return stage_cost(x, u, dL * (x[0] * dm.sqrt(x[0]) * inv_sqrt_gm), hom)
+    cost: FuelStageCost
+    gm: float
 
-    return cost
+    def _duration(self, x, dL):
+        return dL * (x[0] * dm.sqrt(x[0]) * self.gm ** -0.5)
+
+    def __call__(self, x, u, dL, hom=(0.0, 1.0)):
+        return self.cost(x, u, self._duration(x, dL), hom)
+
+    def propellant(self, x, thrust, dL):
+        return self.cost.propellant(x, thrust, self._duration(x, dL))
+
+
+def sundman_stage_cost(stage_cost: FuelStageCost, gm: float) -> SundmanStageCost:
+    """``stage_cost`` on stages of true longitude (``SundmanStageCost``)."""
+    return SundmanStageCost(stage_cost, float(gm))
 
 
 def keep_out(units, r_min_km: float):

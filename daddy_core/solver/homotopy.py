@@ -6,7 +6,7 @@ h = 0 is the energy-optimal problem; raising h and shrinking delta moves the sta
 """
 from __future__ import annotations
 
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 
 import numpy as np
 
@@ -111,10 +111,7 @@ def continuation(problem: Problem, X, U, steps: tuple, method: Method, opts: Sol
         mult = res.mult
         X, U = res.stages.X, res.stages.U
         if i + 1 < len(steps):   # (mu is reset above: only the multipliers carry over)
-            g, _, gt, _ = problem.constraint_values(X, U)
-            est = update_multipliers(mult, g, gt, opts)
-            if np.all(np.isfinite(est.lam)) and np.all(np.isfinite(est.lam_t)):
-                mult = est
+            mult = _next_multipliers(problem, X, U, mult, opts)
         if np.all(np.isfinite(X)) and np.all(np.isfinite(U)):
             best = (X, U)
         history.append({"h": hom[0], "delta": hom[1], "aul_iterations": res.iterations,
@@ -132,3 +129,32 @@ def continuation(problem: Problem, X, U, steps: tuple, method: Method, opts: Sol
     return HomotopyResult(best[0], best[1], res.stages, mult, gains, res.rho, aul_iterations,
                           history, converged, reason, stalled,
                           res.status is Status.AUL_DIVERGED)
+
+
+def _next_multipliers(problem: Problem, X, U, mult: Multipliers,
+                      opts: SolverOptions) -> Multipliers:
+    """The multipliers the next homotopy step starts from: eq. 9's update at the solution
+    (X, U) of a step (``continuation``: why), or ``mult`` where it is not finite."""
+    g, _, gt, _ = problem.constraint_values(X, U)
+    est = update_multipliers(mult, g, gt, opts)
+    if np.all(np.isfinite(est.lam)) and np.all(np.isfinite(est.lam_t)):
+        return est
+    return mult
+
+
+def resume(problem: Problem, done: HomotopyResult, steps: tuple, method: Method,
+           opts: SolverOptions, stats: DDPStats, deadline: float | None = None, progress=None,
+           rho: float | None = None) -> HomotopyResult:
+    """``continuation`` of the further ``steps`` from the solution of a continuation that ran
+    the steps before them (``done``), as if one continuation had run them all: from its
+    solution with the multipliers of eq. 9's update there; the iterations and the history
+    summed."""
+    mult = _next_multipliers(problem, done.X, done.U, done.mult, opts)
+    more = continuation(problem, done.X, done.U, steps, method, opts, stats, deadline, progress,
+                        rho=rho, duals=mult.as_duals())
+    converged = done.converged and more.converged
+    return replace(more, gains=more.gains or done.gains,
+                   aul_iterations=done.aul_iterations + more.aul_iterations,
+                   history=done.history + more.history, converged=converged,
+                   reason=more.reason if done.converged else done.reason,
+                   stalled=done.stalled or more.stalled)

@@ -47,7 +47,7 @@ from .newton import (BandedSigma, ConstraintModel, NewtonResult, column_weights,
                      stage_columns)
 from .optimality import Optimality, every_constraint, objective, optimality
 from .options import SolverOptions
-from .results import Status, StepResult
+from .results import Status, StepResult, not_halved
 from .stage_maps import StageMaps
 
 # Hessian shifts (relative to its largest diagonal entry): Levenberg-Marquardt-like levels
@@ -66,10 +66,13 @@ class KKTResult(StepResult):
 
 
 def kkt_polish(problem: Problem, X, U, hom, opts: SolverOptions, optimality0: Optimality,
-               deadline: float | None = None) -> KKTResult:
+               deadline: float | None = None, stall_iter: int = 0) -> KKTResult:
     """From a feasible (X, U) whose first-order optimality is ``optimality0``, Newton on the
     KKT conditions (module docstring) until the KKT residual is at most opts.tol_optimality,
-    for at most opts.kkt_max_iter iterations. Every iterate's stage maps are expanded afresh:
+    for at most opts.kkt_max_iter iterations, or (``stall_iter`` > 0) until the lowest residual
+    so far has not halved over ``stall_iter`` iterations (``Status.KKT_STALLED``: the residual
+    is not monotone -- a step that changes the working set can raise it). Every iterate's
+    stage maps are expanded afresh:
     re-centred maps carry derivative errors that the Hessian and Jacobian of a Newton step on
     the KKT conditions cannot afford (its convergence turned linear with them)."""
     opt, f = optimality0, objective(problem, X, U, hom)
@@ -77,6 +80,7 @@ def kkt_polish(problem: Problem, X, U, hom, opts: SolverOptions, optimality0: Op
     level = 0              # index into _SHIFTS, carried between iterations
     it = newton_its = 0
     status = Status.KKT_MAX_ITER
+    lowest = [opt.kkt_residual]     # the lowest residual after each iteration
     try:
         model = every_constraint(problem, X, U)
     except (DaddyError, ArithmeticError, ValueError):
@@ -87,6 +91,9 @@ def kkt_polish(problem: Problem, X, U, hom, opts: SolverOptions, optimality0: Op
             break
         if deadline is not None and time.perf_counter() > deadline:
             status = Status.TIME_BUDGET
+            break
+        if not_halved(lowest, stall_iter):
+            status = Status.KKT_STALLED
             break
         it += 1
         try:
@@ -104,6 +111,7 @@ def kkt_polish(problem: Problem, X, U, hom, opts: SolverOptions, optimality0: Op
         X, U, f, n_its, mu, level = step
         newton_its += n_its
         opt = new
+        lowest.append(min(lowest[-1], opt.kkt_residual))
     return KKTResult(opt.kkt_residual <= opts.tol_optimality, it, status, X, U, opt,
                      StageMaps.of(model.F, X, U, opts.eps_da), newton_its)
 

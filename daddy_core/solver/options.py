@@ -194,6 +194,15 @@ class SolverOptions:
             is solved again (AUL + DDP, then both polishings) from the polished iterate with
             its KKT multipliers, at most this many times, and kept when it ends with a smaller
             KKT residual (``solve``: why).
+        exact_fuel: a fuel-optimal solve of a problem that has an exact fuel form (``throttle``:
+            the thrust as throttle and direction, the propellant linear in the throttle) ends
+            with the KKT polishing of that form, for at most ``exact_fuel_max_iter`` iterations,
+            instead of polishing the pseudo-Huber cost of the last homotopy step: the solution
+            is the true fuel optimum (``throttle``: why). It is tried from the energy-optimal
+            (first) step's solution, then from the end of the rest of the homotopy, each try
+            stopped when its lowest KKT residual has not halved over ``exact_fuel_stall_iter``
+            iterations; if neither converges, the last step's pseudo-Huber end game runs
+            (``solve._exact_end``: why).
     Run:
         time_budget_s: wall-clock budget for the whole solve (None: unbounded).
         verbose: print progress lines (homotopy step, AUL iteration, violation, cost).
@@ -249,6 +258,9 @@ class SolverOptions:
     kkt_chord_iter: int = 6
     kkt_restore_iter: int = 4
     kkt_resolves: int = 1
+    exact_fuel: bool = True
+    exact_fuel_max_iter: int = 100
+    exact_fuel_stall_iter: int = 10
     path_exchange_rounds: int = 4
     time_budget_s: float | None = None
     verbose: bool = False

@@ -9,6 +9,7 @@ from dataclasses import replace
 
 from ..path_constraints import dense_margin, tightened
 from ..problem import Problem
+from .homotopy import homotopy_steps
 from .options import SolverOptions
 from .solution import Solution, WarmStart
 
@@ -28,6 +29,15 @@ def _merged(first: Solution, later: list[Solution]) -> Solution:
     return replace(last, iterations=iterations, runtime_s=runtime, history=history)
 
 
+def _last_step(problem: Problem, sol: Solution, opts: SolverOptions) -> tuple:
+    """The homotopy step an exchange round solves again: the last pseudo-Huber step of a
+    fuel-optimal solve (the options' last, when its exact end game ran from the energy step
+    before any), else the step solved last."""
+    if sol.fuel_optimal:
+        return sol.fuel_step or homotopy_steps(problem, sol.U, opts, True)[-1]
+    return (sol.history[-1]["h"], sol.history[-1]["delta"]) if sol.history else opts.homotopy[0]
+
+
 def hold(problem: Problem, sol: Solution, resolve, opts: SolverOptions, progress) -> Solution:
     """``sol`` of ``problem`` with g_path held between the nodes: up to
     ``opts.path_exchange_rounds`` rounds of (dense check, tighten the offending stages' samples,
@@ -41,9 +51,7 @@ def hold(problem: Problem, sol: Solution, resolve, opts: SolverOptions, progress
         offset = tightened(problem.path_offset, pm, opts.tol_newton)
         if offset is None:
             break
-        last = sol.history[-1] if sol.history else None   # the homotopy step solved last
-        options = opts.with_(homotopy=((last["h"], last["delta"]),) if last
-                             else opts.homotopy[:1])
+        options = opts.with_(homotopy=(_last_step(problem, sol, opts),))
         if opts.time_budget_s is not None:   # the first solve's time and every round's since
             left = opts.time_budget_s - first.runtime_s.get("total", 0.0) \
                 - (time.perf_counter() - start)

@@ -40,12 +40,13 @@ class Status(Enum):
     KKT_CONVERGED = "KKT residual below tol_optimality"
     KKT_MAX_ITER = "kkt_max_iter reached"
     KKT_NO_DESCENT = "no KKT step lowered the cost"
+    KKT_STALLED = "the lowest KKT residual did not halve over exact_fuel_stall_iter iterations"
 
 
 def not_halved(history: list, k: int) -> bool:
     """The last of ``history`` (a violation or residual after each iteration) is above half the
     one k iterations before (False until there are k + 1 of them, or when k = 0): the test
-    behind ``Status.AUL_STALLED`` and ``Status.NEWTON_STALLED``."""
+    behind ``Status.AUL_STALLED``, ``Status.NEWTON_STALLED`` and ``Status.KKT_STALLED``."""
     return 0 < k < len(history) and history[-1] > 0.5 * history[-1 - k]
 
 

@@ -96,6 +96,16 @@ class Solution:
         return self.U.shape[0]
 
     @property
+    def fuel_step(self) -> tuple | None:
+        """(h, delta) of the last pseudo-Huber homotopy step the solve ran (h > 0), or None: an
+        energy-optimal solve, or a fuel-optimal one whose exact end game converged from the
+        energy step's solution before any (``SolverOptions.exact_fuel``)."""
+        for step in reversed(self.history):
+            if step.get("h", 0.0) > 0:
+                return (step["h"], step["delta"])
+        return None
+
+    @property
     def thrust_n(self) -> np.ndarray:
         """Controls in newtons (N, nu) (JSON: ``U_N``)."""
         return self.U * self.units.get("thrust_unit_n", 1.0)
