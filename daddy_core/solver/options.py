@@ -260,7 +260,7 @@ class SolverOptions:
     kkt_resolves: int = 1
     exact_fuel: bool = True
     exact_fuel_max_iter: int = 100
-    exact_fuel_stall_iter: int = 10
+    exact_fuel_stall_iter: int = 50
     path_exchange_rounds: int = 4
     time_budget_s: float | None = None
     verbose: bool = False
