@@ -141,7 +141,8 @@ def _iteration(problem: Problem, X, U, hom, f: float, model: ConstraintModel,
         Xt, Ut = model.apply(dY)
         cost_model = c @ dY + 0.5 * (dY @ (Hf @ dY))
         res = _trial(problem, model, Xt, Ut, hom, f + cost_model, opts.kkt_cost_slack * predicted,
-                     restore_opts, deadline, maps)
+                     opts.kkt_trial_violation * float(np.max(np.abs(dY))), restore_opts,
+                     deadline, maps)
         if res is None:
             continue
         newton_its += res.iterations
@@ -157,12 +158,18 @@ def _iteration(problem: Problem, X, U, hom, f: float, model: ConstraintModel,
 
 
 def _trial(problem: Problem, model: ConstraintModel, X, U, hom, cost_model: float,
-           slack: float, opts: SolverOptions, deadline, maps: StageMaps) -> NewtonResult | None:
+           slack: float, step: float, opts: SolverOptions, deadline,
+           maps: StageMaps) -> NewtonResult | None:
     """The restoration (``_restore``) of the KKT step's point (X, U), or None when the step is
     refused: its cost misses ``cost_model`` (the cost's own quadratic model there) by more than
     ``slack`` -- the step left the region where the cost is quadratic (e.g. a coasting control
-    across the kink of the fuel cost), refused before the costly restoration -- or the point
-    cannot be flown. The smallest shifts' long steps can leave the elements' domain (NaN from a
+    across the kink of the fuel cost), refused before the costly restoration -- or its
+    constraints, whose linearisation the step meets, are violated by more than ``step``
+    (``kkt_trial_violation`` times max |dY|): the remainder is second order in the step, and
+    one that large means the step left the region where the model holds (a cost linear in the
+    controls, as the exact fuel form's, cannot tell: its first unshifted steps took the
+    Earth-Mars throttle to 1e7, and their Newton restorations cost 2.6 s of a 4.6 s solve) --
+    or the point cannot be flown. The smallest shifts' long steps can leave the elements' domain (NaN from a
     square root in the dynamics on a small LEO raise, KKT residual 1.35: the stage integration
     raised, and the whole polishing stopped with "no KKT step lowered the cost" before any
     larger shift was tried); a larger shift then takes a shorter step. numpy's warnings on such
@@ -171,24 +178,27 @@ def _trial(problem: Problem, model: ConstraintModel, X, U, hom, cost_model: floa
         try:
             if not abs(objective(problem, X, U, hom) - cost_model) <= slack:
                 return None
-            return _restore(problem, model, X, U, opts, deadline, maps)
+            return _restore(problem, model, X, U, opts, deadline, maps, step)
         except (DaddyError, ArithmeticError, ValueError, np.linalg.LinAlgError):
             return None
 
 
 def _restore(problem: Problem, model: ConstraintModel, X, U, opts: SolverOptions, deadline,
-             maps: StageMaps) -> NewtonResult:
+             maps: StageMaps, refuse_above: float = np.inf) -> NewtonResult | None:
     """Feasibility after a KKT step. The step met the constraints' linearisation, so what is
     left is second order: chord iterations -- minimum-norm corrections on the step's own
     Jacobian (``model``'s D, factorised once) with exact float residuals -- usually take it
     below tol_newton at the cost of one float integration each. When they do not, Newton
     (Alg. 11) with at most ``opts.newton_max_iter`` iterations: a step whose restoration needs
-    more left the region where the linearisation holds, and a larger shift is cheaper."""
+    more left the region where the linearisation holds, and a larger shift is cheaper. None
+    (refused) when (X, U) violates the constraints by more than ``refuse_above``."""
     ineq = model.inequality_rows()
     rows, sigma, last = None, None, np.inf
     Xc, Uc = X, U
     for it in range(opts.kkt_chord_iter):
         values, violation = _exact_values(problem, Xc, Uc)
+        if it == 0 and not violation <= refuse_above:   # (or NaN)
+            return None
         if not violation < 0.5 * last:   # (or NaN) chords that do not converge fast stop
             break
         if violation <= opts.tol_newton:

@@ -186,6 +186,10 @@ class SolverOptions:
         kkt_cost_slack: a KKT step whose cost at Y + dY misses the cost's own quadratic model
             by more than this many predicted decreases is refused before its restoration (it
             left the region where the cost is quadratic) and the Hessian shift raised.
+        kkt_trial_violation: a KKT step whose point violates the constraints by more than
+            this many times its own size (max |dY|) is refused before its restoration (the
+            linearisation's remainder is second order in the step: the step left the region
+            where the model holds) and the Hessian shift raised.
         kkt_chord_iter, kkt_restore_iter: a KKT step's restoration to feasibility: chord
             iterations on the step's own Jacobian first (each one float integration), then
             Newton with at most kkt_restore_iter iterations (a step needing more left the
@@ -199,9 +203,11 @@ class SolverOptions:
             with the KKT polishing of that form, for at most ``exact_fuel_max_iter`` iterations,
             instead of polishing the pseudo-Huber cost of the last homotopy step: the solution
             is the true fuel optimum (``throttle``: why). It is tried from the energy-optimal
-            (first) step's solution, then from the end of the rest of the homotopy, each try
-            stopped when its lowest KKT residual has not halved over ``exact_fuel_stall_iter``
-            iterations; if neither converges, the last step's pseudo-Huber end game runs
+            (first) step's solution, stopped when its lowest KKT residual has not halved over
+            ``exact_fuel_stall_iter`` iterations (GTO->GEO's halves only over tens of them, on
+            its way to converging in 95), then from the end of the rest of the homotopy,
+            stopped after ``exact_fuel_end_stall_iter`` (near the optimum there, it converges
+            in 15 or creeps); if neither converges, the last step's pseudo-Huber end game runs
             (``solve._exact_end``: why).
     Run:
         time_budget_s: wall-clock budget for the whole solve (None: unbounded).
@@ -255,12 +261,14 @@ class SolverOptions:
     tol_optimality: float = 1e-4
     kkt_max_iter: int = 30
     kkt_cost_slack: float = 5.0
+    kkt_trial_violation: float = 100.0
     kkt_chord_iter: int = 6
     kkt_restore_iter: int = 4
     kkt_resolves: int = 1
     exact_fuel: bool = True
     exact_fuel_max_iter: int = 100
     exact_fuel_stall_iter: int = 50
+    exact_fuel_end_stall_iter: int = 10
     path_exchange_rounds: int = 4
     time_budget_s: float | None = None
     verbose: bool = False

@@ -387,7 +387,7 @@ def _kkt(problem: Problem, end: _End, hom: tuple, polish: bool, opts: SolverOpti
                  f"{opt.kkt_residual:.2e} -> {res.optimality.kkt_residual:.2e} ({res.reason})")
     end.X, end.U, end.optimality, end.maps = res.X, res.U, res.optimality, res.maps or end.maps
     end.newton_iterations += res.newton_iterations
-    end.kkt_iterations = res.iterations
+    end.kkt_iterations += res.iterations
     end.kkt_reason = res.reason
     return end
 
@@ -410,11 +410,11 @@ def _exact_end(problem: Problem, hres: HomotopyResult, end: _End, start: _Start,
     (``hres``, polished to ``end``), three tries, each from a feasible end and kept when it
     meets tol_optimality: the KKT polishing of the exact fuel form (``throttle``) from there,
     stopped when it stalls (``exact_fuel_stall_iter``); the same from the end of the rest of
-    the homotopy (``homotopy.resume``); the pseudo-Huber end game of that last step
-    (``_pseudo_huber_end``), whose result stands whatever it reaches.
+    the homotopy (``homotopy.resume``; ``exact_fuel_end_stall_iter``); the pseudo-Huber end
+    game of that last step (``_pseudo_huber_end``), whose result stands whatever it reaches.
 
     Why: from the energy optimum the exact form converged in 12-23 KKT iterations on every
-    catalogue case but two, at the optima the whole homotopy reaches (Earth-Mars, halo, DRO,
+    catalogue case but three (GTO->GEO: 95), at the optima the whole homotopy reaches (Earth-Mars, halo, DRO,
     DRO 2 revolutions, NRHO: the same masses), and it skips the pseudo-Huber steps whose DDP
     crawls at the kink on the Earth-centred transfers (LEO->LEO: 106 s in all instead of an
     unconverged 30 minutes); on the Lyapunov and DRO 3-revolution transfers it creeps (the
@@ -425,7 +425,7 @@ def _exact_end(problem: Problem, hres: HomotopyResult, end: _End, start: _Start,
     pseudo-Huber end game is what converges there."""
     if len(steps) > 1:
         if end.converged:
-            tried = _exact_fuel(problem, end, opts, clock, progress)
+            tried = _exact_fuel(problem, end, opts, clock, progress, opts.exact_fuel_stall_iter)
             if _meets_tol(tried, opts):
                 return hres, tried
             newton_its, kkt_its = tried.newton_iterations, tried.kkt_iterations
@@ -441,7 +441,7 @@ def _exact_end(problem: Problem, hres: HomotopyResult, end: _End, start: _Start,
         end.newton_iterations += newton_its   # (the work of the first try counted)
         end.kkt_iterations += kkt_its
     if end.converged:
-        tried = _exact_fuel(problem, end, opts, clock, progress)
+        tried = _exact_fuel(problem, end, opts, clock, progress, opts.exact_fuel_end_stall_iter)
         if _meets_tol(tried, opts):
             return hres, tried
         end.newton_iterations, end.kkt_iterations = tried.newton_iterations, tried.kkt_iterations
@@ -455,8 +455,8 @@ def _meets_tol(end: _End, opts: SolverOptions) -> bool:
             and end.optimality.kkt_residual <= opts.tol_optimality)
 
 
-def _exact_fuel(problem: Problem, end: _End, opts: SolverOptions, clock: _Clock,
-                progress) -> _End:
+def _exact_fuel(problem: Problem, end: _End, opts: SolverOptions, clock: _Clock, progress,
+                stall_iter: int) -> _End:
     """A copy of the feasible, polished ``end`` KKT-polished in the exact fuel form
     (``throttle``: thrust as throttle and direction): its thrust, the form's optimality, fresh
     stage maps of ``problem`` and the exact propellant cost."""
@@ -470,7 +470,7 @@ def _exact_fuel(problem: Problem, end: _End, opts: SolverOptions, clock: _Clock,
         return replace(end, converged=False, reason="the exact fuel problem's KKT residual "
                        "could not be evaluated at the homotopy's end")
     res = kkt_polish(fuel, end.X, V, _EXACT, opts.with_(kkt_max_iter=opts.exact_fuel_max_iter),
-                     opt, clock.deadline, opts.exact_fuel_stall_iter)
+                     opt, clock.deadline, stall_iter)
     if progress:
         progress(f"exact fuel (throttle and direction): {res.iterations} KKT iterations, "
                  f"residual {opt.kkt_residual:.2e} -> {res.optimality.kkt_residual:.2e} "
