@@ -169,11 +169,11 @@ def _trial(problem: Problem, model: ConstraintModel, X, U, hom, cost_model: floa
     one that large means the step left the region where the model holds (a cost linear in the
     controls, as the exact fuel form's, cannot tell: its first unshifted steps took the
     Earth-Mars throttle to 1e7, and their Newton restorations cost 2.6 s of a 4.6 s solve) --
-    or the point cannot be flown. The smallest shifts' long steps can leave the elements' domain (NaN from a
-    square root in the dynamics on a small LEO raise, KKT residual 1.35: the stage integration
-    raised, and the whole polishing stopped with "no KKT step lowered the cost" before any
-    larger shift was tried); a larger shift then takes a shorter step. numpy's warnings on such
-    a point would only be noise."""
+    or the point cannot be flown. The smallest shifts' long steps can leave the elements'
+    domain (NaN from a square root in the dynamics on a small LEO raise, KKT residual 1.35:
+    the stage integration raised, and the whole polishing stopped with "no KKT step lowered
+    the cost" before any larger shift was tried); a larger shift then takes a shorter step.
+    numpy's warnings on such a point would only be noise."""
     with np.errstate(invalid="ignore", over="ignore", divide="ignore"):
         try:
             if not abs(objective(problem, X, U, hom) - cost_model) <= slack:

@@ -40,7 +40,7 @@ class Status(Enum):
     KKT_CONVERGED = "KKT residual below tol_optimality"
     KKT_MAX_ITER = "kkt_max_iter reached"
     KKT_NO_DESCENT = "no KKT step lowered the cost"
-    KKT_STALLED = "the lowest KKT residual did not halve over the stall window (exact_fuel_stall_iter)"
+    KKT_STALLED = "the lowest KKT residual did not halve over the stall window"
 
 
 def not_halved(history: list, k: int) -> bool:

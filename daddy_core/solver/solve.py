@@ -413,16 +413,16 @@ def _exact_end(problem: Problem, hres: HomotopyResult, end: _End, start: _Start,
     the homotopy (``homotopy.resume``; ``exact_fuel_end_stall_iter``); the pseudo-Huber end
     game of that last step (``_pseudo_huber_end``), whose result stands whatever it reaches.
 
-    Why: from the energy optimum the exact form converged in 12-23 KKT iterations on every
-    catalogue case but three (GTO->GEO: 95), at the optima the whole homotopy reaches (Earth-Mars, halo, DRO,
-    DRO 2 revolutions, NRHO: the same masses), and it skips the pseudo-Huber steps whose DDP
-    crawls at the kink on the Earth-centred transfers (LEO->LEO: 106 s in all instead of an
-    unconverged 30 minutes); on the Lyapunov and DRO 3-revolution transfers it creeps (the
-    residual 0.115 -> 0.101 in 100 iterations) where the homotopy's path leads to the optimum
-    (DRO 3 revolutions: the exact form from there converges in 15 iterations). On Lyapunov it
-    creeps from the homotopy's end too (3.1e-4 after 100 iterations, a resumed homotopy's end;
-    the end of one continuation over all steps meets tol_optimality as it is), and the
-    pseudo-Huber end game is what converges there."""
+    Why: from the energy optimum the exact form converged on every catalogue case but two, in
+    12-23 KKT iterations (GTO->GEO: 95), at the optima the whole homotopy reaches (Earth-Mars,
+    halo, DRO, DRO 2 revolutions, NRHO: the same masses), and it skips the pseudo-Huber steps
+    whose DDP crawls at the kink on the Earth-centred transfers (LEO->LEO: 93 s of CPU in all,
+    where the homotopy was unconverged after 30 minutes); on the Lyapunov and DRO
+    3-revolution transfers it creeps (the residual 0.115 -> 0.101 in 100 iterations) where the
+    homotopy's path leads to the optimum (DRO 3 revolutions: the exact form from there
+    converges in 15 iterations). On Lyapunov it creeps from the homotopy's end too (3.1e-4
+    after 100 iterations, a resumed homotopy's end; the end of one continuation over all
+    steps meets tol_optimality as it is), and the pseudo-Huber end game is what converges."""
     if len(steps) > 1:
         if end.converged:
             tried = _exact_fuel(problem, end, opts, clock, progress, opts.exact_fuel_stall_iter)
