@@ -178,7 +178,8 @@ def _report(sol: Solution) -> None:
           f"AUL {it['aul']}, DDP {it['ddp']}, "
           f"Newton {it['newton']}, KKT {it.get('kkt', 0)}; "
           f"polynomial share {sol.polynomial_share:.0%}")
-    print(f"  runtime {rt['total']:.2f} s (DDP {rt['ddp']:.2f} s, Newton {rt['newton']:.2f} s)")
+    print(f"  runtime {rt['total']:.2f} s (DDP {rt['ddp']:.2f} s, Newton {rt['newton']:.2f} s, "
+          f"KKT {rt.get('kkt', 0.0):.2f} s)")
 
 
 if __name__ == "__main__":

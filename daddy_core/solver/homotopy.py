@@ -83,10 +83,12 @@ def homotopy_steps(problem: Problem, U0: np.ndarray, opts: SolverOptions,
 
 def continuation(problem: Problem, X, U, steps: tuple, method: Method, opts: SolverOptions,
                  stats: DDPStats, deadline: float | None = None, progress=None,
-                 rho: float | None = None, duals: dict | None = None, F=None) -> HomotopyResult:
+                 rho: float | None = None, duals: dict | None = None, F=None,
+                 numbering: tuple[int, int] | None = None) -> HomotopyResult:
     """Run the AUL (Alg. 4) on each homotopy step from (X, U) (F: their stage maps, if known;
     duals: warm-start multipliers; rho: the Quu regularisation each step starts from). Stops
-    after a step that ran out of time.
+    after a step that ran out of time. ``numbering``: (steps before these, all steps) for the
+    progress lines, when these are part of a longer homotopy.
 
     Each step after the first starts from the previous step's solution with the penalty back
     at mu_init and the multipliers of eq. 9's update there (lam + mu g: the first-order
@@ -100,7 +102,8 @@ def continuation(problem: Problem, X, U, steps: tuple, method: Method, opts: Sol
     res = None
     for i, hom in enumerate(steps):
         if progress:
-            progress(f"homotopy {i + 1}/{len(steps)}: h = {hom[0]}, delta = {hom[1]}")
+            before, total = numbering or (0, len(steps))
+            progress(f"homotopy {before + i + 1}/{total}: h = {hom[0]}, delta = {hom[1]}")
         mult.mu[...] = opts.mu_init
         mult.mu_t[...] = opts.mu_init
         st = (Stages(problem, X, U, mult, hom, opts.eps_da, F=F) if res is None
@@ -150,8 +153,10 @@ def resume(problem: Problem, done: HomotopyResult, steps: tuple, method: Method,
     solution with the multipliers of eq. 9's update there; the iterations and the history
     summed."""
     mult = _next_multipliers(problem, done.X, done.U, done.mult, opts)
+    before = len(done.history)
     more = continuation(problem, done.X, done.U, steps, method, opts, stats, deadline, progress,
-                        rho=rho, duals=mult.as_duals())
+                        rho=rho, duals=mult.as_duals(),
+                        numbering=(before, before + len(steps)))
     converged = done.converged and more.converged
     return replace(more, gains=more.gains or done.gains,
                    aul_iterations=done.aul_iterations + more.aul_iterations,

@@ -202,7 +202,7 @@ def _solve(problem: Problem, u_guess, method: Method, fuel_optimal: bool | None,
     exact = _exact_wanted(problem, steps, polish, opts)
     hres = continuation(problem, start.X, start.U, steps[:1] if exact else steps, method, opts,
                         stats, clock.deadline, progress, rho=warm.rho, duals=warm.duals,
-                        F=start.F)
+                        F=start.F, numbering=(0, len(steps)))
     clock.lap("ddp", t0)
     end = _finish(problem, hres, start, polish, opts, clock, progress)
     if exact:
