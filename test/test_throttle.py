@@ -100,7 +100,7 @@ def test_earth_mars_fuel_optimal_is_the_true_fuel_optimum_of_the_oracle():
     assert np.asarray(sol.duals["lam"]).shape == (2, prob.N)
 
 
-def test_a_warm_re_solve_from_the_exact_optimum_stays_there():
+def test_a_warm_re_solve_from_the_exact_optimum_ends_there_again():
     """A fuel-optimal solve warm-started from its own solution (controls, duals, maps) ends
     at the same exact optimum (one DDP solve of the energy step, then the exact end game)."""
     prob = problem_from_case(EARTH_MARS)
