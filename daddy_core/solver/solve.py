@@ -424,13 +424,11 @@ def _exact_end(problem: Problem, hres: HomotopyResult, end: _End, start: _Start,
     after 100 iterations, a resumed homotopy's end; the end of one continuation over all
     steps meets tol_optimality as it is), and the pseudo-Huber end game is what converges."""
     if len(steps) > 1:
+        spent = end   # (the work so far, counted in the end of the rest of the homotopy)
         if end.converged:
-            tried = _exact_fuel(problem, end, opts, clock, progress, opts.exact_fuel_stall_iter)
-            if _meets_tol(tried, opts):
-                return hres, tried
-            newton_its, kkt_its = tried.newton_iterations, tried.kkt_iterations
-        else:
-            newton_its, kkt_its = end.newton_iterations, end.kkt_iterations
+            spent = _exact_fuel(problem, end, opts, clock, progress, opts.exact_fuel_stall_iter)
+            if _meets_tol(spent, opts):
+                return hres, spent
         if progress:
             progress("the rest of the homotopy from the first step's solution")
         t0 = time.perf_counter()
@@ -438,8 +436,8 @@ def _exact_end(problem: Problem, hres: HomotopyResult, end: _End, start: _Start,
                       rho)
         clock.lap("ddp", t0)
         end = _finish(problem, hres, start, True, opts, clock, progress)
-        end.newton_iterations += newton_its   # (the work of the first try counted)
-        end.kkt_iterations += kkt_its
+        end.newton_iterations += spent.newton_iterations
+        end.kkt_iterations += spent.kkt_iterations
     if end.converged:
         tried = _exact_fuel(problem, end, opts, clock, progress, opts.exact_fuel_end_stall_iter)
         if _meets_tol(tried, opts):
@@ -574,11 +572,8 @@ def _assemble(problem: Problem, end: _End, hres: HomotopyResult, steps: tuple, m
                   f"({end.kkt_reason})")
     t = clock.times
     gains = hres.gains
-    described = _described(problem, X, U, steps, method, case_name)
-    if end.cost is not None:
-        described["cost"] = end.cost
     return Solution(
-        **described, converged=converged,
+        **_described(problem, X, U, steps, method, case_name, end.cost), converged=converged,
         reason=reason,
         gains_a=gains.a if gains else np.zeros((N, nu)),
         gains_b=gains.b if gains else np.zeros((N, nu, nx)), max_violation=gmax,
@@ -598,15 +593,17 @@ def _assemble(problem: Problem, end: _End, hres: HomotopyResult, steps: tuple, m
 
 
 def _described(problem: Problem, X: np.ndarray, U: np.ndarray, steps: tuple, method: Method,
-               case_name: str | None) -> dict:
+               case_name: str | None, cost: float | None = None) -> dict:
     """The Solution fields that describe (X, U) of ``problem`` whatever the solve did: what
-    was solved, the trajectory, its cost at the last homotopy step and its mass figures."""
+    was solved, the trajectory, its cost (``cost``, the objective solved, or at the last
+    homotopy step) and its mass figures."""
     m, units = problem.mass_index, problem.units
     return dict(
         case=case_name or problem.name, method=method.value,
         fuel_optimal=len(steps) > 1 or (steps[0][0] > 0), X=X, U=U,
         stage_dt=problem.stage_dt.copy(), t_start=problem.t_start,
-        time_index=problem.time_index, cost=objective(problem, X, U, steps[-1]),
+        time_index=problem.time_index,
+        cost=objective(problem, X, U, steps[-1]) if cost is None else cost,
         final_mass_kg=float(X[-1, m] * units.mu_kg) if m is not None else None,
         propellant_kg=float((X[0, m] - X[-1, m]) * units.mu_kg) if m is not None else None,
         units=units.as_dict())
