@@ -791,17 +791,41 @@ def test_newtons_backtracking_picks_the_step_a_trial_by_trial_search_picks():
     assert cut >= 2   # (the quadratic was used, not only the full step)
 
 
-def test_each_homotopy_step_starts_from_the_multipliers_estimated_at_the_last_solution():
+def test_each_homotopy_step_starts_from_the_multipliers_estimated_at_the_last_solution(
+        monkeypatch):
     """``continuation`` hands the next homotopy step eq. 9's update at the previous step's
     solution (lam + mu g), not the multipliers its last DDP solve ran with, which lag by
-    mu g: the halo's last step (h = 0.999) then meets tol_aul after at most 3 AUL solves
-    (7 before), at the same optimum."""
+    mu g; the whole halo homotopy then converges at the pseudo-Huber optimum. (The number of
+    AUL solves the last step takes depends on the last bits of the BLAS arithmetic: 3 on an
+    Intel machine, 7 on an AMD one -- not asserted.)"""
+    from daddy_core.solver import homotopy
+    from daddy_core.solver.aul import update_multipliers
+
+    starts, ends = [], []
+    real_aul = homotopy.aul
+
+    def spy(stages, *args, **kw):
+        starts.append((stages.mult.lam.copy(), stages.mult.lam_t.copy(),
+                       stages.mult.mu.copy(), stages.mult.mu_t.copy()))
+        res = real_aul(stages, *args, **kw)
+        ends.append(res)
+        return res
+    monkeypatch.setattr(homotopy, "aul", spy)
     case = load_case("halo_l2_l1")
     prob = problem_from_case(case)
+    opts = case_options(case, True, exact_fuel=False)
     sol = solve(prob, np.full((prob.N, 3), float(case.units.thrust(1e-6))), fuel_optimal=True,
-                options=case_options(case, True, exact_fuel=False))   # (the whole homotopy)
+                options=opts)   # (the whole homotopy)
     assert sol.converged, sol.reason
-    assert sol.history[-1]["aul_iterations"] <= 3, [h["aul_iterations"] for h in sol.history]
+    assert len(starts) == len(opts.homotopy) >= 2
+    for k in range(1, len(starts)):
+        prev = ends[k - 1]
+        g, _, gt, _ = prob.constraint_values(prev.stages.X, prev.stages.U)
+        want = update_multipliers(prev.mult, g, gt, opts)
+        lam, lam_t, mu, mu_t = starts[k]
+        assert np.array_equal(lam, want.lam) and np.array_equal(lam_t, want.lam_t), k
+        assert not np.array_equal(lam_t, prev.mult.lam_t), k   # (the update moved them)
+        assert np.all(mu == opts.mu_init) and np.all(mu_t == opts.mu_init), k
     assert sol.final_mass_kg == pytest.approx(973.941, abs=2e-3)
 
 
