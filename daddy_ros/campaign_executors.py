@@ -35,7 +35,7 @@ INSTALL_HINT = ("--executor dask needs Dask, the campaigns extra: pip install "
 # of a 2-worker campaign, and the workers ~5 % more CPU per run than pool workers): the
 # event-loop tick (20 ms) and the memory and system monitors (100 / 500 ms) run less often,
 # and the statistical profiler (a stack sample of the running task every 10 ms) is off.
-# Workers of an existing cluster take their own config (README).
+# Workers of an existing cluster take their own config (`docs/campaigns.md`).
 WORKER_CONFIG = {"distributed.worker.profile.enabled": False,
                  "distributed.admin.tick.interval": "1s",
                  "distributed.worker.memory.monitor-interval": "1s",

@@ -94,7 +94,7 @@ def continuation(problem: Problem, X, U, steps: tuple, method: Method, opts: Sol
     at mu_init and the multipliers of eq. 9's update there (lam + mu g: the first-order
     estimate at that solution), not those its last DDP solve ran with: an AUL that met tol_aul
     as mu grew ends with multipliers that lag by mu g, and with mu reset the next step's first
-    DDP solve traded the constraints away on them (README status: what it changed)."""
+    DDP solve traded the constraints away on them (`docs/design-notes.md`)."""
     mult = Multipliers.initial(problem, opts.mu_init)
     mult.take_duals(duals)
     best, gains, history, aul_iterations = (X, U), None, [], 0
