@@ -152,6 +152,26 @@ def test_problem_settings_are_apart_from_solver_settings():
         case_from_dict(d)
 
 
+@pytest.mark.parametrize("where, key, msg", [
+    ((), "r_min_km", r"'r_min_km' is unknown: .*problem_from_case\(case, r_min_km"),
+    ((), "stagez", r"'stagez' is unknown \(known: name, .*stages,"),
+    (("problem",), "tol_ddp", r"'problem.tol_ddp' is unknown: it belongs in the 'solver'"),
+    (("problem",), "gain", r"'problem.gain' is unknown \(known: stage_cost_gain"),
+    (("spacecraft",), "mass_kg", r"'spacecraft.mass_kg' is unknown \(known: wet_mass_kg"),
+    (("solver", "homotopy"), "H", r"'solver.homotopy.H' is unknown \(known: h, delta\)"),
+])
+def test_an_unknown_key_anywhere_in_a_case_file_is_named_with_the_known_ones(where, key, msg):
+    """A key the loader does not read is an error, never silently ignored (a top-level
+    ``r_min_km`` once solved the problem without its keep-out and said nothing)."""
+    d = json.loads((load_case.__globals__["CASES_DIR"] / "halo_l2_l1.json").read_text())
+    section = d
+    for name in where:
+        section = section[name]
+    section[key] = 1.0
+    with pytest.raises(DaddyError, match=msg):
+        case_from_dict(d)
+
+
 @pytest.mark.parametrize("name", ["earth_mars", "halo_l2_l1", "leo_leo", "double_integrator"])
 def test_states_convert_to_si_and_back_for_every_system(name):
     # one place for the state <-> SI conversion (Units), including the equinoctial elements,

@@ -39,6 +39,16 @@ STATE_UNITS = ("normalized", "km_km_s", "keplerian_km_deg")
 PROBLEM_KEYS = ("stage_cost_gain", "terminal_cost_gain", "integrator_tol")
 # a case's solver section: the paper's per-case settings (``solver.case_options``), no others
 SOLVER_KEYS = ("tol_ddp", "tol_aul", "tol_newton", "rho_max", "homotopy", "u_guess_n")
+HOMOTOPY_KEYS = ("h", "delta")
+SPACECRAFT_KEYS = ("wet_mass_kg", "dry_mass_kg", "max_thrust_n", "isp_s", "g0_m_s2")
+# every top-level field a case file may have (which apply depends on its system)
+CASE_KEYS = ("name", "description", "source", "system", "state_units", "x0", "x_target",
+             "tof_days", "stages", "stage_duration", "stages_per_revolution", "revolutions",
+             "perturbations", "spacecraft", "problem", "solver")
+# fields that are not case settings, and where they are set instead
+_SET_ELSEWHERE = {"r_min_km": "it is not a case setting: give it to problem_from_case(case, "
+                              "r_min_km=...) or `daddy solve --r-min-km`",
+                  **{k: "it belongs in the 'solver' section" for k in SOLVER_KEYS}}
 
 
 class Perturbation(str, Enum):
@@ -183,6 +193,20 @@ def case_from_dict(d: dict) -> Case:
             raise DaddyError(f"case field {key!r} is missing")
         return d[key]
 
+    _known_keys(d, CASE_KEYS, "")
+    for section, keys in (("problem", PROBLEM_KEYS),
+                          ("spacecraft", SPACECRAFT_KEYS)):
+        if not isinstance(d.get(section, {}), dict):
+            raise DaddyError(f"case field {section!r} must be an object")
+        _known_keys(d.get(section, {}), keys, f"{section}.")
+    if not isinstance(d.get("solver", {}), dict):
+        raise DaddyError("case field 'solver' must be an object")
+    hom = d.get("solver", {}).get("homotopy")
+    if hom is not None:
+        if not isinstance(hom, dict):
+            raise DaddyError("case field 'solver.homotopy' must be an object {\"h\": [...], "
+                             "\"delta\": [...]}")
+        _known_keys(hom, HOMOTOPY_KEYS, "solver.homotopy.")
     name = str(need("name"))
     system = need("system")
     if system not in SYSTEMS:
@@ -261,6 +285,18 @@ def _earth_case(d: dict, name: str, units: Units, spacecraft: Spacecraft, x0: np
                 problem=dict(d.get("problem", {})), solver=dict(d.get("solver", {})),
                 revolutions=float(revs), t_start=L0, perturbations=perturbations,
                 stages_per_revolution=spr)
+
+
+def _known_keys(d: dict, known: tuple, prefix: str) -> None:
+    """A DaddyError naming the first key of ``d`` not in ``known`` (and where it belongs, for a
+    field that is set elsewhere), with the known ones."""
+    unknown = sorted(set(d) - set(known))
+    if not unknown:
+        return
+    key = unknown[0]
+    where = _SET_ELSEWHERE.get(key)
+    hint = f": {where}" if where else ""
+    raise DaddyError(f"case field '{prefix}{key}' is unknown{hint} (known: {', '.join(known)})")
 
 
 def _perturbations(names) -> frozenset:
