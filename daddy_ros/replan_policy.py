@@ -20,9 +20,6 @@ A warm re-plan starts from a converged plan shifted to the new state (``shift``)
   penalty starts three growth steps below its cap, so "three solves at the cap" is no stall
   there, and a re-plan that cannot meet its target has the thrust-margin ladder and the last
   valid plan to fall back on;
-- DDP does not stop on its prediction alone (``SolverOptions.ddp_stop_on_prediction``): the
-  small steps it would skip are what keeps closed-loop plans optimal (propellant and arrival
-  margin in the Monte Carlo);
 - the KKT residual is neither evaluated nor polished (``tol_optimality`` = inf): its
   expansion of every stage and the KKT polishing's would cost a re-plan more than its whole
   latency target allows, and a re-plan starts next to a plan that was polished.

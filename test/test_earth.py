@@ -133,7 +133,7 @@ def test_a_fuel_optimal_leo_raise_converges_at_its_exact_fuel_optimum():
 
 @pytest.mark.parametrize("tof_days", [1.0, 2.0])
 def test_a_solution_lends_a_warm_start_the_multipliers_of_its_kkt_point(tof_days):
-    """``Solution.duals`` are the KKT multipliers of the solution (``solve._duals``): solving the
+    """``Solution.duals`` are the KKT multipliers of the solution (``assemble.duals``): solving the
     same problem again from it, the augmented Lagrangian starts at the optimum's multipliers and
     needs one DDP solve of one iteration. With the multipliers the cold solve's last AUL solve
     ran with (they lag the optimum's by mu g) it took 2-5 AUL solves, and on the 1-day raise
@@ -238,7 +238,7 @@ def test_violations_of_an_earth_case_are_named_by_element():
     labels = {r["name"]: r["label"] for r in report}
     assert labels["g_teq[0]"] == "p" and labels["g_teq[3]"] == "h"
     assert labels["g_teq[5]"] == "arrival time" and labels["g_ineq[1]"] == "dry mass"
-    from daddy_core.solver.solve import _describe
+    from daddy_core.solver.assemble import _describe
     assert _describe(report[0]).startswith(f"{report[0]['name']} ({report[0]['label']}) ")
 
 

@@ -134,23 +134,23 @@ def test_a_stalled_kkt_polishing_hands_the_last_homotopy_step_back_to_ddp(fuel):
 
 
 def test_a_re_solve_replaces_the_polished_end_only_when_no_costlier():
-    """``solve._improves``: a re-solve of the last homotopy step replaces the KKT-polished end
+    """``end_game.improves``: a re-solve of the last homotopy step replaces the KKT-polished end
     when it is feasible with a smaller KKT residual at no higher cost. Far from a KKT point
     the residual alone misleads: LEO->LEO fuel kept a re-solve that ended at a cost of 29.21
     (956.80 kg) over a polished end below 27.64 for a residual of 1.45 against 1.57."""
     from daddy_core.solver.optimality import Optimality
-    from daddy_core.solver.solve import _End, _improves
+    from daddy_core.solver.end_game import End, improves
     prob, sol = _di_optimum()
     X2, U2 = _feasible_detour(prob, sol.U, 5e-2)            # feasible, costlier
 
     def end(X, U, kkt, converged=True):
-        return _End(X, U, None, converged, "", 0,
-                    optimality=Optimality(kkt, 0.0, np.zeros(1), np.zeros(1)))
+        return End(X, U, None, converged, "",
+                   optimality=Optimality(kkt, 0.0, np.zeros(1), np.zeros(1)))
     assert objective(prob, X2, U2, HOM) > objective(prob, sol.X, sol.U, HOM)
-    assert _improves(prob, HOM, end(sol.X, sol.U, 0.5), end(X2, U2, 1.0))
-    assert not _improves(prob, HOM, end(X2, U2, 0.5), end(sol.X, sol.U, 1.0))   # costlier
-    assert not _improves(prob, HOM, end(sol.X, sol.U, 1.0), end(X2, U2, 0.5))   # residual
-    assert not _improves(prob, HOM, end(sol.X, sol.U, 0.5, False), end(X2, U2, 1.0))
+    assert improves(prob, HOM, end(sol.X, sol.U, 0.5), end(X2, U2, 1.0))
+    assert not improves(prob, HOM, end(X2, U2, 0.5), end(sol.X, sol.U, 1.0))   # costlier
+    assert not improves(prob, HOM, end(sol.X, sol.U, 1.0), end(X2, U2, 0.5))   # residual
+    assert not improves(prob, HOM, end(sol.X, sol.U, 0.5, False), end(X2, U2, 1.0))
 
 
 def test_the_residual_round_trips_and_older_solutions_load():

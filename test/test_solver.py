@@ -124,18 +124,6 @@ def test_solution_round_trips_and_warm_starts(tmp_path):
     assert warm.cost == pytest.approx(sol.cost, rel=1e-9)
 
 
-def test_ddp_stop_on_prediction_still_steps_from_an_infeasible_start():
-    # from an infeasible start the small steps are how the augmented Lagrangian meets the
-    # constraints: DDP still takes them (the stop needs the constraints met to tol_aul; the
-    # guidance planner's use from a restored start: test_planner)
-    di = problem_from_case(DI)
-    sol = solve_case("double_integrator")
-    warm = solve(di, sol.U * 1.01, options=case_options(DI, False).with_(
-        ddp_min_iter=1, ddp_stop_on_prediction=True))
-    assert warm.converged and warm.iterations["ddp"] > 0
-    assert warm.cost == pytest.approx(sol.cost, rel=1e-6)
-
-
 def test_stage_maps_roll_out_and_restore_like_integration():
     # the Earth-Mars nominal plan's stage maps: a Dyn rollout (polynomials inside their radius)
     # follows the integrated one, and a Newton restoration from a perturbed start that
@@ -299,7 +287,7 @@ def test_options_are_validated():
 @pytest.mark.parametrize("nu", [1, 2, 3, 4])
 def test_regularised_inverse_matches_numpy_and_rejects_indefinite(nu):
     """The Q_uu + rho I inverse of the backward sweep (plain Python; unrolled for nu = 3)."""
-    from daddy_core.solver.ddp import _regularised_inverse
+    from daddy_core.solver.linalg import regularised_inverse as _regularised_inverse
     rng = np.random.default_rng(nu)
     for _ in range(50):
         M = rng.normal(size=(nu, nu))
@@ -590,7 +578,7 @@ def test_trust_region_inverse_puts_the_step_on_the_boundary(nu):
     """The trust-region subproblem's shifted inverse: the step -(Quu + lam I)^-1 Qu has norm
     radius (to 1e-3), lam >= rho, and the shifted matrix is the inverse of Quu + lam I, for
     well- and ill-conditioned Quu (a linear-in-u cost: eigenvalues down to 1e-8)."""
-    from daddy_core.solver.ddp import _trust_region_inverse
+    from daddy_core.solver.linalg import trust_region_inverse as _trust_region_inverse
     rng = np.random.default_rng(10 + nu)
     for scale in (1.0, 1e-8):
         for _ in range(20):
@@ -669,7 +657,7 @@ def test_a_cold_start_is_restored_to_feasibility_before_ddp(capsys):
 
 
 def test_a_cold_guess_newton_cannot_restore_falls_back_to_the_restored_ballistic_start():
-    """``solve._restore_ballistic``: a random DRO->DRO guess (thrust up to u_max, uniform
+    """``start._restore_ballistic``: a random DRO->DRO guess (thrust up to u_max, uniform
     directions) whose restoration stalls gets the ballistic trajectory restored instead, and
     DDP from there reaches the paper guess's energy optimum; the paper's 1e-6 N guess, which
     flies the ballistic trajectory already, does not repeat its stalled restoration."""
@@ -861,12 +849,12 @@ def test_a_newton_run_whose_residual_stays_put_has_stalled():
 
 
 def test_a_feasible_iterate_whose_ddp_solve_ran_into_its_bound_gets_one_more_solve():
-    """``aul._ends_feasible``: the augmented Lagrangian stops on a feasible iterate when its DDP
+    """``aul_safeguards.ends_feasible``: the augmented Lagrangian stops on a feasible iterate when its DDP
     solve converged, or when the one before it ran into ddp_max_iter too -- never on the first
     feasible iterate that DDP's iteration bound cut off."""
     from types import SimpleNamespace
 
-    from daddy_core.solver.aul import _ends_feasible
+    from daddy_core.solver.aul_safeguards import ends_feasible as _ends_feasible
     from daddy_core.solver.results import Status
     opts = SolverOptions()
     bound, done = (SimpleNamespace(status=s) for s in (Status.DDP_MAX_ITER,
@@ -881,11 +869,12 @@ def test_a_feasible_iterate_whose_ddp_solve_ran_into_its_bound_gets_one_more_sol
 
 
 def test_a_ddp_solve_whose_steps_stay_cut_short_without_progress_has_stalled():
-    """``ddp._crawling``: ddp_stall_iter steps in a row, each cut below ddp_stall_alpha of the
+    """``stopping.crawling``: ddp_stall_iter steps in a row, each cut below ddp_stall_alpha of the
     full step and each lowering the cost by less than tol_ddp, stop a DDP solve (the Lyapunov
     harness's guesses 8, 16, 27 crawled 150-200 iterations at alpha ~ 1e-5); a shorter stretch
     (guess 0's: 7 steps), a long step in between, or real progress does not."""
-    from daddy_core.solver.ddp import _crawling
+    from daddy_core.solver.results import Status
+    from daddy_core.solver.stopping import Stopping, crawling as _crawling
     opts = SolverOptions()
     k = opts.ddp_stall_iter
 
@@ -905,20 +894,20 @@ def test_a_ddp_solve_whose_steps_stay_cut_short_without_progress_has_stalled():
     assert not _crawling(run([7.6e-6] * k, 1e-6), SolverOptions(ddp_stall_iter=0))
     # the trust-region retry of a failed line search: rejections after its first accepted step
     # are steps of length zero; before it, the region is still shrinking to where the model holds
-    from daddy_core.solver.ddp import _rejected_crawl
-    shrinking = [(1e8, 1.0)]
-    assert not any(_rejected_crawl(shrinking, 1e8, True, opts) for _ in range(2 * k))
-    after_one = run([1e-7], 1e-7)   # with k - 1 rejections, k steps of no progress
-    calls = [_rejected_crawl(after_one, after_one[-1][0], True, opts) for _ in range(k - 1)]
-    assert calls == [False] * (k - 2) + [True]
-    assert not any(_rejected_crawl(run([1e-7], 1e-7), 1e8, False, opts) for _ in range(2 * k))
+    shrinking = Stopping(opts, True, [(1e8, 1.0)])
+    assert not any(shrinking.after_rejection(1e8) for _ in range(2 * k))
+    after_one = Stopping(opts, True, run([1e-7], 1e-7))   # with k - 1 rejections, k steps
+    calls = [after_one.after_rejection(after_one.steps[-1][0]) for _ in range(k - 1)]
+    assert calls == [None] * (k - 2) + [Status.DDP_STALLED]
+    plain = Stopping(opts, False, run([1e-7], 1e-7))
+    assert not any(plain.after_rejection(1e8) for _ in range(2 * k))
 
 
 def test_a_first_ddp_solve_that_leaves_an_infeasible_start_far_behind_has_diverged():
-    """``aul._diverged``: the first solve of an AUL loop diverged when both globalisations were
+    """``aul_safeguards.diverged``: the first solve of an AUL loop diverged when both globalisations were
     cut off and the max violation grew a hundredfold over an infeasible start's; a feasible
     (restored) start, a smaller growth, or a solve that converged never count."""
-    from daddy_core.solver.aul import _diverged
+    from daddy_core.solver.aul_safeguards import diverged as _diverged
     opts = SolverOptions()
     assert _diverged(358.0, 0.27, True, opts)           # Lyapunov guess 27
     assert not _diverged(358.0, 0.27, False, opts)      # a globalisation converged
@@ -964,8 +953,8 @@ def _first_step_across_a_bound(bound: float):
     (problem, stages at the zero guess, gains, DDP's first full trial, its stage costs (N,),
     the expected decrease, the actual decrease)."""
     from daddy_core.da import functions as dm
-    from daddy_core.solver import ddp as D
-    from daddy_core.solver.lagrangian import Multipliers
+    from daddy_core.solver import sweeps as D
+    from daddy_core.solver.lagrangian import Multipliers, augmented_cost_terms
     from daddy_core.solver.options import Sweep
 
     base = _rest_to_rest(stage_cost=lambda x, u, dt, hom: u[0] * u[0] * dt)
@@ -977,7 +966,7 @@ def _first_step_across_a_bound(bound: float):
     st = D.Stages(prob, prob.rollout(U), U, Multipliers.initial(prob, 1e8), (0.0, 1.0), 1e-6)
     gains = D.backward_sweep(st, Sweep.STD, 0.0)
     trial = D.forward_pass(st, gains, 1.0, dyn=False)
-    stage_costs, terminal = D.augmented_cost_terms(prob, trial.X, trial.U, st.mult, st.hom)
+    stage_costs, terminal = augmented_cost_terms(prob, trial.X, trial.U, st.mult, st.hom)
     return (prob, st, gains, trial, stage_costs, -(gains.dv1 + gains.dv2),
             st.cost - float(np.sum(stage_costs) + terminal))
 
@@ -985,18 +974,20 @@ def _first_step_across_a_bound(bound: float):
 def test_a_line_search_that_fails_at_a_few_stages_bounds_those_stages_only():
     """A bound of 0.55 that the first full step crosses at the first and the last stage (a
     tenth of the stages: a failure that is local): the failure is pinned on stages that crossed
-    the bound (``ddp._blamed_stages``), never on the middle ones; the forward pass then clamps
-    those stages' control changes to their new bounds. With and without the per-stage trust
-    region the solve reaches the same optimum. A bound of 0.45, crossed at 5 of 20 stages, is a
-    failure of the whole step: nothing is blamed (one shorter step for every stage)."""
-    from daddy_core.solver import ddp as D
+    the bound (``globalization.blamed_stages``), never on the middle ones; the forward pass
+    then clamps those stages' control changes to their new bounds. With and without the
+    per-stage trust region the solve reaches the same optimum. A bound of 0.45, crossed at 5 of
+    20 stages, is a failure of the whole step: nothing is blamed (one shorter step for every
+    stage)."""
+    from daddy_core.solver import globalization as G
+    from daddy_core.solver import sweeps as D
 
     tol = SolverOptions().tol_ddp
     prob, st, gains, trial, stage_costs, expected, actual = _first_step_across_a_bound(0.55)
     assert actual < 0                                    # the full step fails
     crossed = np.flatnonzero(np.abs(trial.U[:, 0]) > 0.55)
     assert 0 < crossed.size <= prob.N // 10
-    blamed = D._blamed_stages(st, trial, stage_costs, expected, actual, tol)
+    blamed = G.blamed_stages(st, trial, stage_costs, expected, actual, tol)
     assert blamed.size and set(blamed) <= set(crossed)
     bounds = np.full(prob.N, np.inf)
     bounds[blamed] = 0.5 * np.abs(trial.U[blamed, 0])
@@ -1013,22 +1004,22 @@ def test_a_line_search_that_fails_at_a_few_stages_bounds_those_stages_only():
     prob, st, gains, trial, stage_costs, expected, actual = _first_step_across_a_bound(0.45)
     assert actual < 0
     assert np.sum(np.abs(trial.U[:, 0]) > 0.45) > prob.N // 10
-    assert D._blamed_stages(st, trial, stage_costs, expected, actual, tol).size == 0
+    assert G.blamed_stages(st, trial, stage_costs, expected, actual, tol).size == 0
 
 
 def test_a_trust_region_step_that_fails_at_a_few_stages_bounds_those_stages_only():
     """The trust region's rejected step blames stages as the line search's first trial does
-    (``ddp._trust_region_step``): the first full step across the 0.55 bound comes back as a
-    ``Blame`` of stages that crossed it, not as a rejection that shrinks every stage's region;
-    with and without it the trust region reaches the line search's optimum."""
-    from daddy_core.solver import ddp as D
+    (``globalization.trust_region_step``): the first full step across the 0.55 bound comes
+    back as a ``Blame`` of stages that crossed it, not as a rejection that shrinks every
+    stage's region; with and without it the trust region reaches the line search's optimum."""
+    from daddy_core.solver import globalization as G
 
     prob, st, gains, trial, *_ = _first_step_across_a_bound(0.55)
     crossed = np.flatnonzero(np.abs(trial.U[:, 0]) > 0.55)
     opts = SolverOptions(globalization="trust_region")
-    out = D._trust_region_step(st, gains, False, opts, st.cost)
-    assert isinstance(out, D.Blame) and set(out.stages) <= set(crossed)
-    assert D._trust_region_step(st, gains, False, opts.with_(stage_trust=False), st.cost) is None
+    out = G.trust_region_step(st, gains, False, opts, st.cost)
+    assert isinstance(out, G.Blame) and set(out.stages) <= set(crossed)
+    assert G.trust_region_step(st, gains, False, opts.with_(stage_trust=False), st.cost) is None
     ref = solve(prob, st.U)
     for stage_trust in (True, False):
         sol = solve(prob, st.U, options=opts.with_(stage_trust=stage_trust))

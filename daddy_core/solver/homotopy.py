@@ -14,7 +14,8 @@ from ..errors import DaddyError
 from ..fuel import FUEL_HOMOTOPY
 from ..problem import Problem
 from .aul import aul, update_multipliers
-from .ddp import DDPStats, Gains, Stages
+from .ddp import DDPStats
+from .sweeps import Gains, Stages
 from .lagrangian import Multipliers
 from .options import Method, SolverOptions
 from .results import Status

@@ -73,16 +73,8 @@ class SolverOptions:
             (the line search's alpha; in the trust-region retry of a failed line search, the
             region's radius / step, a rejected step counting as zero) and lowered the cost by
             less than tol_ddp (relative): the model holds along a vanishing fraction of each
-            step, and the iteration bound would be spent crawling (``ddp._crawling``: the
+            step, and the iteration bound would be spent crawling (``stopping.crawling``: the
             measurement). 0 turns the test off.
-        ddp_stop_on_prediction: also stop DDP, before the forward pass, when the backward
-            sweep predicts a relative decrease below ddp_predicted_stop_fraction * tol_ddp for
-            the full step (after ddp_min_iter iterations) and the constraints meet tol_aul; a
-            start that Newton restored then needs no polishing either. Off by default: skipping
-            those small steps changes the augmented-Lagrangian path of cold solves, and in the
-            closed loop the plans it leaves unoptimised cost propellant and arrival margin.
-        ddp_predicted_stop_fraction: that fraction (below tol_ddp itself, where the post-step
-            test would call the step's outcome converged anyway).
         rho_init, rho_min, rho_max, rho_factor: Quu regularisation schedule.
         ls_min_ratio, ls_max_ratio, ls_shrink, ls_max_halvings: backtracking line search; a step
             is accepted when actual / expected decrease is in (min, max).
@@ -96,14 +88,14 @@ class SolverOptions:
         globalization: ``Globalization`` (or its value): "line_search" or "trust_region".
         stage_trust: a trust region per stage: when the line search's first trial (or a
             trust-region step) fails because the stage cost's own model failed at a few stages
-            (``ddp._blamed_stages``), those stages' control changes are bounded to half of
+            (``globalization.blamed_stages``), those stages' control changes are bounded to half of
             what failed (the sweep's per-stage radius and the forward pass's clamp) and the
             sweep runs again, instead of one shorter step length (or a smaller region) for
             every stage; an accepted step that a bound held back grows that bound by
             (1 + tr_kappa).
         tr_fallback: with the line search, a DDP solve that runs into ddp_max_iter (or stalls)
             is solved again from its start with the trust region, which the rest of that
-            homotopy step keeps (``aul._trust_region_fallback``: why, and its ratio tolerance).
+            homotopy step keeps (``aul_safeguards.fallback_options``).
         tr_ratio_tol, tr_kappa: the trust region accepts a step when |actual / expected - 1|
             <= tr_ratio_tol and then grows its radius by (1 + tr_kappa), else shrinks it by
             (1 - tr_kappa) and sweeps again on the same expansions (PDDP's Table 2: 0.1, 0.25;
@@ -239,8 +231,6 @@ class SolverOptions:
     ddp_min_iter: int = 3
     ddp_stall_iter: int = 20
     ddp_stall_alpha: float = 1e-3
-    ddp_stop_on_prediction: bool = False
-    ddp_predicted_stop_fraction: float = 0.1
     aul_max_iter: int = 40
     newton_max_iter: int = 60
     lambda_max: float = 1e8

@@ -13,7 +13,6 @@ class Status(Enum):
     TIME_BUDGET = "time budget exceeded"
     # DDP
     DDP_CONVERGED = "relative cost decrease below tol_ddp"
-    DDP_PREDICTED = "predicted cost decrease below tol_ddp / 10"
     DDP_MAX_ITER = "ddp_max_iter reached"
     QUU_INDEFINITE = "Q_uu not positive definite up to rho_max"
     LINE_SEARCH_FAILED = "line search failed up to rho_max"

@@ -1,0 +1,96 @@
+"""The augmented Lagrangian's safeguards beyond paper Alg. 4, each a named hook that ``aul``
+calls (the cases that needed them, the measurements and the tests: docs/design-notes.md).
+
+- ``fallback_options``: a line-search DDP solve cut off by its bound or stalled is solved
+  again from its start with the trust region;
+- ``without_drift``: states that the Dyn pass's re-centred maps let drift from the flow are
+  restored;
+- ``diverged``: a first DDP solve that ends far more violated than its infeasible start;
+- ``ends_feasible``: a feasible iterate whose DDP solve was cut off gets one more solve;
+- ``stalled``: the penalty at its cap without progress.
+"""
+from __future__ import annotations
+
+import numpy as np
+
+from . import newton
+from .lagrangian import Multipliers
+from .options import Globalization, SolverOptions
+from .results import Status, not_halved
+from .sweeps import Stages
+
+# the trust region's |actual / expected - 1| tolerance when the line search falls back to it
+FALLBACK_RATIO_TOL = 0.5
+# a DDP solve that ended without its stopping test: not optimal where it stopped
+CUT_OFF = (Status.DDP_MAX_ITER, Status.DDP_STALLED)
+# the first DDP solve diverged when its max violation grew this many times over the start's
+DIVERGED_GROWTH = 100.0
+
+
+def fallback_options(res, opts: SolverOptions) -> SolverOptions | None:
+    """The options to solve again with -- the trust region, at a ratio tolerance of at least
+    ``FALLBACK_RATIO_TOL`` -- after a line-search DDP solve that ran into ddp_max_iter or
+    stalled (``SolverOptions.tr_fallback``), or None. The rest of that AUL loop (one homotopy
+    step) keeps them; the next step starts with the line search again. Rationale: the trust
+    region accepts only steps its model predicts, where the line search's path can leave it."""
+    if not (opts.tr_fallback and res.status in CUT_OFF
+            and opts.globalization is Globalization.LINE_SEARCH):
+        return None
+    return opts.with_(globalization=Globalization.TRUST_REGION,
+                      tr_ratio_tol=max(opts.tr_ratio_tol, FALLBACK_RATIO_TOL))
+
+
+def without_drift(st: Stages, opts: SolverOptions, deadline: float | None) -> Stages:
+    """``st``, or -- when its states have drifted from the dynamics -- the expansions of a
+    consistent trajectory near it: Newton's restoration (its stage defects and constraints to
+    tol_newton; the controls' exact rollout when Newton fails).
+
+    A map re-centred after every accepted step (``sweeps.new_maps``) walks away from where it
+    was expanded; the stages whose maps walked beyond their radius (``Stages.walked``) are
+    checked against their exact flow (one batched float integration), and a defect above the
+    maps' accuracy (eps_da) is drift."""
+    p = st.problem
+    k = np.flatnonzero(st.walked > st.radius)
+    if k.size == 0:
+        return st
+    flows = p.step(st.X[k].T, st.U[k].T, p.stage_dt[k], p.stage_t0[k])
+    if not np.max(np.abs(flows - st.X[k + 1].T)) > st.eps_da:
+        return st
+    res = newton.restore(p, st.X, st.U, opts, deadline)
+    X, U = (res.X, res.U) if res.converged else (p.rollout(st.U), st.U)
+    if not (np.all(np.isfinite(X)) and np.all(np.isfinite(U))):
+        return st
+    return Stages(p, X, U, st.mult, st.hom, st.eps_da)
+
+
+def ends_feasible(res, gmax: float, after_cut_off: bool, opts: SolverOptions) -> bool:
+    """A feasible iterate ends the augmented Lagrangian when its DDP solve ended on its own
+    stopping test -- or when the solve before it (``after_cut_off``) also ran into its bound
+    at a feasible point. Alg. 4 assumes its inner solves converged: a solve cut off by its
+    bound is not optimal, so the loop gives DDP one more solve from there."""
+    if not gmax <= opts.tol_aul:   # (NaN: not feasible, as Alg. 4's test before this one)
+        return False
+    return res.status not in CUT_OFF or after_cut_off
+
+
+def diverged(gmax: float, gmax_start: float, both_cut_off: bool, opts: SolverOptions) -> bool:
+    """The loop's first DDP solve diverged: from a start that violates the constraints
+    (``gmax_start`` > tol_aul), neither the line search nor the trust region it fell back to
+    converged (``both_cut_off``), and the max violation ended ``DIVERGED_GROWTH`` times the
+    start's or more: raising the penalty would restart DDP further off than the guess. A
+    restored (feasible) start never counts: leaving it is the penalty's normal trade."""
+    return (both_cut_off and gmax_start > opts.tol_aul
+            and gmax >= DIVERGED_GROWTH * gmax_start)
+
+
+def at_cap(mult: Multipliers, opts: SolverOptions) -> bool:
+    """Every penalty at mu_max."""
+    return (float(np.min(mult.mu, initial=np.inf)) >= opts.mu_max
+            and float(np.min(mult.mu_t, initial=np.inf)) >= opts.mu_max)
+
+
+def stalled(history: list, capped: int, opts: SolverOptions) -> bool:
+    """The augmented Lagrangian has stalled: the last ``aul_stall_iter`` DDP solves ran with
+    the penalty at mu_max (``capped`` solves in a row did) and the max violation fell by less
+    than half over them (an infeasible problem, or a local minimiser of the violation)."""
+    return opts.aul_stall_iter <= capped and not_halved(history, opts.aul_stall_iter)

@@ -1,0 +1,81 @@
+"""When a DDP solve (Alg. 3) stops, apart from its iteration bound and the time budget: one
+``Stopping`` object per solve keeps the history of accepted steps and judges each iteration's
+outcome (as crocoddyl's ``stoppingCriteria``).
+
+- converged: the relative cost decrease of a (nearly) full step is below tol_ddp
+  (``Status.DDP_CONVERGED``; the paper's test);
+- nothing to gain: the line search found no step for a full step worth less than tol_ddp
+  (``Status.DDP_NOTHING_TO_GAIN``: the mismatch is the forward pass's round-off);
+- stalled: ``ddp_stall_iter`` steps in a row cut below ``ddp_stall_alpha`` of the full step,
+  each lowering the cost by less than tol_ddp (``Status.DDP_STALLED``; design notes: crawl stop).
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+from .options import SolverOptions
+from .results import Status
+from .sweeps import Gains
+
+# the statuses that end a solve converged
+CONVERGED = (Status.DDP_CONVERGED, Status.DDP_NOTHING_TO_GAIN)
+
+
+def crawling(steps: list, opts: SolverOptions) -> bool:
+    """DDP has stalled: each of the last ``ddp_stall_iter`` steps (``steps``: the start's cost,
+    then (cost, fraction) after each step) was cut to less than ``ddp_stall_alpha`` of the full
+    step and lowered the cost by less than tol_ddp (relative).
+
+    The fraction is the line search's alpha; a trust-region step counts as 1 (a region that
+    cuts the Newton step is normal there) -- except in the solve that retries a failed line
+    search (``ddp(retry=True)``): there it is the smallest radius / full step of a stage
+    (``Gains.shortest``), and a rejected step after the first accepted one is a step of length
+    zero (``Stopping.after_rejection``)."""
+    k = opts.ddp_stall_iter
+    if k <= 0 or len(steps) <= k:
+        return False
+    return all(fraction < opts.ddp_stall_alpha
+               and before - after < opts.tol_ddp * max(abs(before), 1e-300)
+               for (before, _), (after, fraction) in zip(steps[-k - 1:-1], steps[-k:]))
+
+
+@dataclass
+class Stopping:
+    """The stopping tests of one DDP solve. ``steps``: the start's cost, then (cost, step
+    fraction) after each accepted step; retry: the solve retries a failed line search with the
+    trust region (``aul``'s fallback)."""
+
+    opts: SolverOptions
+    retry: bool
+    steps: list = field(default_factory=list)
+
+    def after_step(self, it: int, J: float, trial_cost: float, J_new: float, alpha: float,
+                   gains: Gains, full_step_gain: float) -> Status | None:
+        """After an accepted step of length ``alpha`` from cost J to J_new (``trial_cost``: the
+        trial's own evaluation): converged, stalled, or go on (None). A small decrease after a
+        heavily shortened step only says the globalisation struggled, and a step the trust
+        region cut says nothing of the full one."""
+        opts = self.opts
+        rel = (J - trial_cost) / max(abs(J), 1e-300)
+        self.steps.append((J_new, alpha * (gains.shortest if self.retry else 1.0)))
+        if (it >= opts.ddp_min_iter and 0.0 <= rel < opts.tol_ddp and not gains.clipped
+                and (alpha >= 0.5 or full_step_gain < opts.tol_ddp)):
+            return Status.DDP_CONVERGED
+        return Status.DDP_STALLED if crawling(self.steps, opts) else None
+
+    def nothing_to_gain(self, it: int, gains: Gains, full_step_gain: float,
+                        trust_region: bool) -> bool:
+        """The line search found no step that its model predicts, for a full step worth less
+        than tol_ddp: the mismatch is the forward pass's noise (round-off, the Dyn rollout's
+        truncation), which raising rho to rho_max would spend the budget on."""
+        return (not trust_region and it > self.opts.ddp_min_iter
+                and 0.0 <= full_step_gain < self.opts.tol_ddp and not gains.clipped)
+
+    def after_rejection(self, J: float) -> Status | None:
+        """A rejected step of the retry after its first accepted one counts as a step of length
+        zero; before it, rejections are the region shrinking from its unbounded first step to
+        where the model holds."""
+        if not self.retry or len(self.steps) < 2:
+            return None
+        self.steps.append((J, 0.0))
+        return Status.DDP_STALLED if crawling(self.steps, self.opts) else None
