@@ -159,15 +159,7 @@ def rk78(rhs, x, u, t0, dt, tol: float = 1e-13, h0=None, max_steps: int = 10_000
     if real and x.ndim == 1 and np.ndim(dt) == 0 and np.ndim(t0) == 0:
         return _rk78_single(dyn, x, u, float(t0), float(dt), tol, h0, max_steps, stats)
     if real and x.ndim == 2 and x.shape[1] <= _SINGLE_BATCH and stats is None:
-        # a few float states: one at a time in plain Python beats numpy on (nx, B) arrays
-        # (numpy's per-call overhead dominates on 7 x B arrays); same steps as the batched path
-        B = x.shape[1]
-        u, t0, dt = (np.broadcast_to(np.asarray(v, dtype=float), s) for v, s in
-                     ((u, (np.shape(u)[0], B)), (t0, (B,)), (dt, (B,))))
-        hb = None if h0 is None else np.broadcast_to(np.asarray(h0, dtype=float), (B,))
-        return np.stack([_rk78_single(dyn, x[:, j], u[:, j], float(t0[j]), float(dt[j]), tol,
-                                      None if hb is None else hb[j], max_steps, None)
-                         for j in range(B)], axis=1)
+        return _rk78_few(dyn, x, u, t0, dt, tol, h0, max_steps)
     rhs = dyn.f
     x0 = dm.cons(x)
     batch = x0.shape[1:]
@@ -200,30 +192,55 @@ def rk78(rhs, x, u, t0, dt, tol: float = 1e-13, h0=None, max_steps: int = 10_000
         if n_steps > max_steps:
             raise DaddyError(f"rk78 exceeded max_steps={max_steps} (stiff or singular dynamics?)")
         hs = np.where(active, np.minimum(h, remaining), 0.0) * direction
-        st = _Stages(x, 13)
-        for i in range(13):
-            st.push(rhs(base + t + RK78_C[i] * hs, st.combine(st.raw, hs, RK78_A[i]), u))
-        x_new = st.combine(st.raw, hs, RK78_B)
-        kb = st.constant_parts()
-        err_vec = (kb[0] + kb[10] - kb[11] - kb[12]) * (RK78_ERR * hs)
-        err = np.max(np.abs(err_vec), axis=0) if err_vec.ndim else np.abs(err_vec)
-        if not np.all(np.isfinite(err)):
-            raise DaddyError("rk78: dynamics returned NaN or inf")
+        x_new, err = _rk78_trial(rhs, x, u, base + t, hs)
         accept = active & (err <= tol)
         x = dm.where(accept, x_new, x) if np.ndim(accept) else (x_new if accept else x)
         t = np.where(accept, t + hs, t)
-        # classic step controller with safety factor 0.8 and growth bounded in [0.2, 5]
-        with np.errstate(divide="ignore"):
-            fac = 0.8 * (tol / np.maximum(err, 1e-300)) ** (1.0 / 8.0)
-        fac = np.clip(fac, 0.2, 5.0)
-        h = np.where(active, np.abs(hs) * fac, h)
-        h = np.where(h > 0, h, np.abs(dt) / 8.0 + 1e-300)
-        if dyn.max_step is not None:
-            h = np.minimum(h, dyn.max_step)
+        h = _next_step(h, hs, err, tol, active, dt, dyn.max_step)
     if stats is not None:
         stats["steps"] = n_steps
         stats["rhs_calls"] = 13 * n_steps
     return _standard_layout(x if arrived is None else arrived.result(x))
+
+
+def _rk78_few(dyn: Dynamics, x: np.ndarray, u, t0, dt, tol: float, h0, max_steps: int):
+    """``rk78`` of a few float states (nx, B), one at a time in plain Python: numpy's per-call
+    overhead dominates on 7 x B arrays; the same steps as the batched path."""
+    B = x.shape[1]
+    u, t0, dt = (np.broadcast_to(np.asarray(v, dtype=float), s) for v, s in
+                 ((u, (np.shape(u)[0], B)), (t0, (B,)), (dt, (B,))))
+    hb = None if h0 is None else np.broadcast_to(np.asarray(h0, dtype=float), (B,))
+    return np.stack([_rk78_single(dyn, x[:, j], u[:, j], float(t0[j]), float(dt[j]), tol,
+                                  None if hb is None else hb[j], max_steps, None)
+                     for j in range(B)], axis=1)
+
+
+def _rk78_trial(rhs, x, u, t, hs):
+    """One RKF7(8) step of length hs (batch) from x at t: the 8th-order state and the local
+    error estimate (infinity norm of the 7th/8th-order difference of the constant parts)."""
+    st = _Stages(x, 13)
+    for i in range(13):
+        st.push(rhs(t + RK78_C[i] * hs, st.combine(st.raw, hs, RK78_A[i]), u))
+    x_new = st.combine(st.raw, hs, RK78_B)
+    kb = st.constant_parts()
+    err_vec = (kb[0] + kb[10] - kb[11] - kb[12]) * (RK78_ERR * hs)
+    err = np.max(np.abs(err_vec), axis=0) if err_vec.ndim else np.abs(err_vec)
+    if not np.all(np.isfinite(err)):
+        raise DaddyError("rk78: dynamics returned NaN or inf")
+    return x_new, err
+
+
+def _next_step(h, hs, err, tol: float, active, dt, max_step: float | None):
+    """The classic step controller: safety factor 0.8, growth bounded in [0.2, 5], at most
+    ``max_step``; inactive elements keep theirs."""
+    with np.errstate(divide="ignore"):
+        fac = 0.8 * (tol / np.maximum(err, 1e-300)) ** (1.0 / 8.0)
+    fac = np.clip(fac, 0.2, 5.0)
+    h = np.where(active, np.abs(hs) * fac, h)
+    h = np.where(h > 0, h, np.abs(dt) / 8.0 + 1e-300)
+    if max_step is not None:
+        h = np.minimum(h, max_step)
+    return h
 
 
 # the batch drops its arrived elements when at most this share of it is still integrating

@@ -697,7 +697,7 @@ def test_a_newton_step_that_leaves_the_dynamics_domain_is_halved_not_the_end():
                    terminal_cost=lambda x, xt: x[0] * 0.0,
                    g_teq=lambda x, xt: dm.stack([dm.sqrt(x[0]) - 0.05]))
     U = np.zeros((5, 1))
-    res = newton.restore(prob, prob.rollout(U), U, SolverOptions())
+    res = newton.polish(prob, prob.rollout(U), U, SolverOptions())
     assert res.status is Status.NEWTON_CONVERGED, res.reason
     assert abs(np.sqrt(res.X[-1, 0]) - 0.05) <= 1e-10
     # a NaN constraint is never read as met (Python's max drops a NaN in second place)
@@ -719,7 +719,7 @@ def test_a_restoration_thrown_where_a_fresh_model_cannot_descend_stops_there():
         case = load_case(name)
         prob = problem_from_case(case)
         U = np.full((prob.N, prob.nu), float(case.units.thrust(1e-6)))
-        res = newton.restore(prob, prob.rollout(U), U, case_options(case, True))
+        res = newton.polish(prob, prob.rollout(U), U, case_options(case, True))
         assert res.converged is converges, (name, res.reason)
         if not converges:
             assert res.status is Status.NEWTON_NO_DESCENT and res.iterations <= 3, res.reason
@@ -829,10 +829,10 @@ def test_ddp_starts_a_stalled_restorations_guess_from_its_first_expansion():
     prob, opts = problem_from_case(case), case_options(case, False)
     U = np.full((prob.N, prob.nu), float(case.units.thrust(1e-6)))
     X = prob.rollout(U)
-    res = newton.restore(prob, X, U, opts)
+    res = newton.polish(prob, X, U, opts)
     assert not res.converged
     assert np.array_equal(res.start_F.c, expand_dynamics(prob, X[:-1], U).c)
-    warm = newton.restore(prob, X, U, opts, maps=StageMaps.of(res.start_F, X, U, opts.eps_da))
+    warm = newton.polish(prob, X, U, opts, maps=StageMaps.of(res.start_F, X, U, opts.eps_da))
     assert warm.start_F is None
 
 

@@ -56,7 +56,7 @@ def without_drift(st: Stages, opts: SolverOptions, deadline: float | None) -> St
     flows = p.step(st.X[k].T, st.U[k].T, p.stage_dt[k], p.stage_t0[k])
     if not np.max(np.abs(flows - st.X[k + 1].T)) > st.eps_da:
         return st
-    res = newton.restore(p, st.X, st.U, opts, deadline)
+    res = newton.polish(p, st.X, st.U, opts, deadline)
     X, U = (res.X, res.U) if res.converged else (p.rollout(st.U), st.U)
     if not (np.all(np.isfinite(X)) and np.all(np.isfinite(U))):
         return st

@@ -43,7 +43,7 @@ import numpy as np
 from .. import da
 from ..errors import DaddyError
 from ..problem import Problem, largest, max_violation
-from .newton import (BandedSigma, ConstraintModel, NewtonResult, column_weights, newton,
+from .newton import (BandedSigma, ConstraintModel, NewtonResult, column_weights, polish,
                      stage_columns)
 from .optimality import Optimality, every_constraint, objective, optimality
 from .options import SolverOptions
@@ -209,7 +209,7 @@ def _restore(problem: Problem, model: ConstraintModel, X, U, opts: SolverOptions
                 problem, U, opts.newton_control_weight_floor))   # Newton's weighted steps
         Xc, Uc = model.apply(sigma.step(values[rows]), Xc, Uc)
         last = violation
-    return newton(problem, X, U, opts, deadline, maps=maps)   # from the step, not the chords'
+    return polish(problem, X, U, opts, deadline, maps=maps)   # from the step, not the chords'
 
 
 def _exact_values(problem: Problem, X, U):

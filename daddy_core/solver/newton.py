@@ -25,7 +25,7 @@ the previous plan's stage maps), ``polish`` finishes a DDP solution (Alg. 11); b
 from __future__ import annotations
 
 import time
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import numpy as np
 
@@ -279,113 +279,134 @@ def _flat(current: list) -> bool:
             and bool(np.all(np.abs(np.diff(last)) <= _FLAT_TOL * np.abs(last[:-1]))))
 
 
-def restore(problem: Problem, X, U, opts: SolverOptions, deadline: float | None = None,
-            maps: StageMaps | None = None) -> NewtonResult:
-    """A feasible start for DDP from a guess's (X, U) (``SolverOptions.restore_start``): Newton
-    to opts.tol_newton, its derivatives from ``maps`` (a warm start's, the previous plan's)
-    re-centred where they reach, else expanded afresh; a solve stopped
-    later by its time budget still returns a trajectory that meets every constraint."""
-    return newton(problem, X, U, opts, deadline, maps)
-
-
 def polish(problem: Problem, X, U, opts: SolverOptions, deadline: float | None = None,
            maps: StageMaps | None = None) -> NewtonResult:
-    """Alg. 11 on a DDP solution: its constraints to opts.tol_newton (``maps``: the DDP's last
-    stage maps, or None to expand every stage afresh)."""
-    return newton(problem, X, U, opts, deadline, maps)
-
-
-def newton(problem: Problem, X, U, opts: SolverOptions, deadline: float | None = None,
-           maps: StageMaps | None = None) -> NewtonResult:
-    """Alg. 11 from (X, U) to max active-constraint violation <= opts.tol_newton.
+    """Alg. 11 from (X, U) to max active-constraint violation <= opts.tol_newton: the polishing
+    of a DDP solution, and the restoration of a guess (``SolverOptions.restore_start``).
 
     The constraint values Gamma(Y) are always exact (one batched float integration of every
     stage per outer iteration). The stage maps that give their derivatives are re-centred from
     the previous outer iteration's -- first from ``maps``, e.g. a previous plan's -- where the
-    step stayed inside their convergence radius (paper eq. 11, as in the Dyn forward pass) and
-    re-expanded elsewhere. Newton on these derivatives converges at a rate set by their
-    truncation error; an outer iteration that does not reduce the exact residual makes the next
-    one expand every stage afresh. A step whose iterate is not finite (it left the dynamics'
-    domain) is halved. Stalls end the run early (with newton_stall_iter > 0): a best residual
-    that did not halve over newton_stall_iter iterations, an exact residual that stays put
-    (``_flat``), a fresh model above the best residual that cannot be taken down by 1 %.
-    Converged: the returned (best) iterate meets every constraint to tol_newton, whether or
-    not each near-active inequality reached its bound.
+    step stayed inside ``map_reach`` radii (paper eq. 11) and re-expanded elsewhere; an outer
+    iteration that does not reduce the exact residual makes the next one expand afresh. A step
+    whose iterate is not finite (it left the dynamics' domain) is halved. Stalls end the run
+    early (``_stalled``). Converged: the returned (best) iterate meets every constraint to
+    tol_newton, whether or not each near-active inequality reached its bound.
     """
-    X0, U0 = X.copy(), U.copy()
-    it, best, history = 0, None, []   # history: the best residual after each outer iteration
-    current = []                      # the exact residual of each outer iteration's iterate
+    run = _Run(X.copy(), U.copy(), maps)
     status = Status.NEWTON_MAX_ITER
-    prev_dmax, fresh = np.inf, True
-    last = None                       # (model, dY) of the last outer iteration's step
-    start_F = None                    # the first model's maps, if expanded afresh at (X0, U0)
-    cuts = 0                          # halvings of that step so far
-    while it < opts.newton_max_iter:
+    while run.it < opts.newton_max_iter:
         if deadline is not None and time.perf_counter() > deadline:
             status = Status.TIME_BUDGET
             break
-        try:   # (a NaN is handled below: numpy's warning would only be noise)
-            with np.errstate(invalid="ignore", over="ignore", divide="ignore"):
-                fx, dmax, infeasibility = _float_residual(problem, X, U, opts.newton_active_tol)
-        except (DaddyError, ArithmeticError):   # incl. 1 / 0 on Python floats
-            dmax = infeasibility = np.inf
+        fx, dmax, infeasibility = _residual(problem, run.X, run.U, opts.newton_active_tol)
         if not np.isfinite(dmax):
             # the step left the dynamics' domain (e.g. an orbit's eccentricity past 1 in
             # equinoctial elements, where the model's polynomials are still finite): halve it
-            if last is None or cuts >= _NAN_CUTS:
+            if run.last is None or run.cuts >= _NAN_CUTS:
                 status = Status.NEWTON_NAN
                 break
-            cuts += 1
-            last = (last[0], 0.5 * last[1])
-            X, U = last[0].apply(last[1])
+            run.halve()
             continue
-        cuts = 0
-        if best is None or dmax < best[0]:
-            best = (dmax, X.copy(), U.copy(), infeasibility)
-        history.append(best[0])
-        current.append(dmax)
-        # Newton converges fast or not at all: a best residual that did not halve is a stall
-        if (dmax <= opts.tol_newton or not_halved(history, opts.newton_stall_iter)
-                or (opts.newton_stall_iter > 0 and _flat(current))):
-            status = (Status.NEWTON_CONVERGED if dmax <= opts.tol_newton
-                      else Status.NEWTON_STALLED)
+        run.cuts = 0
+        if run.best is None or dmax < run.best[0]:
+            run.best = (dmax, run.X.copy(), run.U.copy(), infeasibility)
+        run.history.append(run.best[0])
+        run.current.append(dmax)
+        status = _stalled(run, dmax, opts)
+        if status is not None:
             break
-        if dmax >= prev_dmax and not fresh:
-            maps = None   # the re-centred derivatives did not help: expand afresh
-        prev_dmax = dmax
-        fresh = maps is None
-        model = ConstraintModel(problem, X, U, opts.newton_active_tol,
-                                F=exact_valued_maps(problem, maps, X, U, fx, opts.map_reach))
-        if it == 0 and fresh:
-            start_F = model.F
-        sigma = _factorise(model, column_weights(problem, U, opts.newton_control_weight_floor),
-                           opts.newton_regularisation)
-        if sigma is None:
-            status = Status.NEWTON_SINGULAR
+        status = _outer_step(problem, run, fx, dmax, opts)
+        if status is not None:
             break
-        dY, inner, model_max = _inner_iterations(model, sigma, dmax, opts)
-        it += 1
-        if inner == 0:
-            if not fresh:   # re-centred derivatives gave no descent: expand afresh
-                maps, prev_dmax, fresh = None, np.inf, True
-                continue
-            status = Status.NEWTON_NO_DESCENT
-            break
-        if (opts.newton_stall_iter > 0 and fresh and dmax > best[0]
-                and model_max > (1.0 - _FLAT_TOL) * dmax):
-            # thrown above its best residual, a fresh model that Newton cannot take down by 1 %
-            # has no way back (Earth-Mars and Lyapunov from the paper's guess: 35.16 and 128
-            # after a step the model misjudged, models reducing them by < 0.01 %; every
-            # converging restoration measured reduced such a model by >= 10 %)
-            status = Status.NEWTON_NO_DESCENT
-            break
-        maps = StageMaps.of(model.F, X, U, opts.eps_da)
-        last = (model, dY)
-        X, U = model.apply(dY)
-    if best is None:
-        return NewtonResult(False, it, status, X0, U0, np.inf, False, maps, start_F)
-    _, Xb, Ub, viol = best
-    return NewtonResult(viol <= opts.tol_newton, it, status, Xb, Ub, viol, True, maps, start_F)
+        status = Status.NEWTON_MAX_ITER
+    if run.best is None:
+        return NewtonResult(False, run.it, status, X, U, np.inf, False, run.maps, run.start_F)
+    _, Xb, Ub, viol = run.best
+    return NewtonResult(viol <= opts.tol_newton, run.it, status, Xb, Ub, viol, True, run.maps,
+                        run.start_F)
+
+
+@dataclass
+class _Run:
+    """The state of one Newton run: the iterate, the maps its derivatives are re-centred from,
+    the best iterate so far, the best and the exact residual after each outer iteration, the
+    last step (model, dY) and its halvings so far, and the first model's maps if expanded
+    afresh at the start (``NewtonResult.start_F``)."""
+
+    X: np.ndarray
+    U: np.ndarray
+    maps: StageMaps | None
+    it: int = 0
+    best: tuple | None = None
+    history: list = field(default_factory=list)
+    current: list = field(default_factory=list)
+    prev_dmax: float = np.inf
+    fresh: bool = True
+    last: tuple | None = None
+    start_F: object = None
+    cuts: int = 0
+
+    def halve(self) -> None:
+        self.cuts += 1
+        self.last = (self.last[0], 0.5 * self.last[1])
+        self.X, self.U = self.last[0].apply(self.last[1])
+
+
+def _residual(problem: Problem, X, U, active_tol: float) -> tuple:
+    """``_float_residual`` at (X, U), with an infinite residual where the flows fail."""
+    try:   # (a NaN is handled by the caller: numpy's warning would only be noise)
+        with np.errstate(invalid="ignore", over="ignore", divide="ignore"):
+            return _float_residual(problem, X, U, active_tol)
+    except (DaddyError, ArithmeticError):   # incl. 1 / 0 on Python floats
+        return None, np.inf, np.inf
+
+
+def _stalled(run: _Run, dmax: float, opts: SolverOptions) -> Status | None:
+    """Converged, or stalled: Newton converges fast or not at all, so a best residual that did
+    not halve over newton_stall_iter iterations, or an exact residual that stays put
+    (``_flat``), ends the run."""
+    if dmax <= opts.tol_newton:
+        return Status.NEWTON_CONVERGED
+    if not_halved(run.history, opts.newton_stall_iter) or (
+            opts.newton_stall_iter > 0 and _flat(run.current)):
+        return Status.NEWTON_STALLED
+    return None
+
+
+def _outer_step(problem: Problem, run: _Run, fx, dmax: float,
+                opts: SolverOptions) -> Status | None:
+    """One outer iteration of Alg. 11: the constraint model at the iterate, its inner Newton
+    steps, and the new iterate (in ``run``); a status when the run ends here."""
+    if dmax >= run.prev_dmax and not run.fresh:
+        run.maps = None   # the re-centred derivatives did not help: expand afresh
+    run.prev_dmax = dmax
+    run.fresh = run.maps is None
+    X, U = run.X, run.U
+    model = ConstraintModel(problem, X, U, opts.newton_active_tol,
+                            F=exact_valued_maps(problem, run.maps, X, U, fx, opts.map_reach))
+    if run.it == 0 and run.fresh:
+        run.start_F = model.F
+    sigma = _factorise(model, column_weights(problem, U, opts.newton_control_weight_floor),
+                       opts.newton_regularisation)
+    if sigma is None:
+        return Status.NEWTON_SINGULAR
+    dY, inner, model_max = _inner_iterations(model, sigma, dmax, opts)
+    run.it += 1
+    if inner == 0:
+        if not run.fresh:   # re-centred derivatives gave no descent: expand afresh
+            run.maps, run.prev_dmax, run.fresh = None, np.inf, True
+            return None
+        return Status.NEWTON_NO_DESCENT
+    if (opts.newton_stall_iter > 0 and run.fresh and dmax > run.best[0]
+            and model_max > (1.0 - _FLAT_TOL) * dmax):
+        # thrown above its best residual, a fresh model that Newton cannot take down by 1 %
+        # has no way back (design notes: no descent on a fresh model)
+        return Status.NEWTON_NO_DESCENT
+    run.maps = StageMaps.of(model.F, X, U, opts.eps_da)
+    run.last = (model, dY)
+    run.X, run.U = model.apply(dY)
+    return None
 
 
 def _factorise(model: ConstraintModel, scale: np.ndarray | None,

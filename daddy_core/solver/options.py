@@ -137,7 +137,7 @@ class SolverOptions:
             arrival plans polished this way missed their target by more.
     Start:
         restore_start: before DDP, drive the initial guess -- cold or warm -- to feasibility
-            with Newton (``newton.restore``); when Newton does not get there from a cold
+            with Newton (``newton.polish``); when Newton does not get there from a cold
             guess that thrusts, it restores the ballistic trajectory (zero control) instead;
             when that stalls too (e.g. Earth-Mars: the ballistic flight is far from Mars), DDP
             starts from the guess itself. If DDP does not converge (e.g. the time budget), the

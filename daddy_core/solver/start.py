@@ -84,7 +84,7 @@ def _restore(ctx: SolveContext, problem: Problem, X, U0, maps,
              cold: bool) -> newton.NewtonResult:
     """Newton's restoration of (X, U0) and, for a cold start it cannot restore, of the
     ballistic trajectory (``_restore_ballistic``); the iterations counted in ``ctx.work``."""
-    res = newton.restore(problem, X, U0, ctx.opts, ctx.clock.deadline, maps=maps)
+    res = newton.polish(problem, X, U0, ctx.opts, ctx.clock.deadline, maps=maps)
     ctx.work.restore += res.iterations
     if not res.converged and cold:
         ballistic = _restore_ballistic(ctx, problem, X, U0, res)
@@ -109,7 +109,7 @@ def _restore_ballistic(ctx: SolveContext, problem: Problem, X, U0,
     if (not np.all(np.isfinite(Xb))
             or np.max(np.abs(Xb - X)) <= _SAME_START_RTOL * np.max(np.abs(X))):
         return None
-    res = newton.restore(problem, Xb, Ub, ctx.opts, ctx.clock.deadline)
+    res = newton.polish(problem, Xb, Ub, ctx.opts, ctx.clock.deadline)
     ctx.say(f"guess not restored ({stalled.reason}); ballistic start: {res.iterations} "
             f"iterations, max violation {res.max_violation:.2e} ({res.reason})")
     return res

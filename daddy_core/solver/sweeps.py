@@ -155,6 +155,25 @@ def _stage_q(st: Stages, k: int, Lk, Jbk, Vb, sweep: Sweep, fzz):
     return Qb_gn, Qb_gn
 
 
+def _cost_to_go(Qb: np.ndarray, Kk: np.ndarray, G: np.ndarray, nx: int,
+                sweep: Sweep) -> np.ndarray:
+    """V_k (bordered, nx+1) of the feedback du = a_k + b_k dx (eq. 4-5; a_k = -Kk[:, n],
+    b_k = -Kk[:, :nx]) in Q_k (bordered, n+1): G^T Q_k G, or Alg. 10's composition P_Q,k(dx,
+    a_k + b_k dx). G (n+1, nx+1) is the caller's work array ([[I, 0], [b, a], [0, 1]])."""
+    n = Qb.shape[0] - 1
+    if sweep is Sweep.Q:
+        pv = da.compose(_quadratic_da(Qb[:n, n], Qb[:n, :n]),
+                        _feedback_map(-Kk[:, n], -Kk[:, :nx]))
+        return _bordered(pv.gradient(), pv.hessian())
+    np.negative(Kk[:, :nx], out=G[nx:n, :nx])
+    np.negative(Kk[:, n], out=G[nx:n, nx])
+    Vb = G.T @ Qb @ G
+    Vb = Vb + Vb.T
+    Vb *= 0.5
+    Vb[nx, nx] = 0.0   # the constant (expected change) is not carried: dv1, dv2
+    return Vb
+
+
 def backward_sweep(st: Stages, sweep: Sweep, rho: float,
                    radius: float | np.ndarray = math.inf) -> Gains | None:
     """One backward sweep; returns None when Q_uu + rho I is not positive definite. radius: the
@@ -202,18 +221,7 @@ def backward_sweep(st: Stages, sweep: Sweep, rho: float,
             np.matmul(Minv, Qb[nx:n], out=Kk)
             clipped += 1
             shortest = min(shortest, radius / full)
-        if sweep is Sweep.Q:
-            # Alg. 10: P_V,k = P_Q,k(dx, a_k + b_k dx)
-            pv = da.compose(_quadratic_da(Qb[:n, n], Qb[:n, :n]),
-                            _feedback_map(-Kk[:, n], -Kk[:, :nx]))
-            Vb = _bordered(pv.gradient(), pv.hessian())
-        else:
-            np.negative(Kk[:, :nx], out=G[nx:n, :nx])
-            np.negative(Kk[:, n], out=G[nx:n, nx])
-            Vb = G.T @ Qb @ G
-            Vb = Vb + Vb.T
-            Vb *= 0.5
-            Vb[nx, nx] = 0.0   # the constant (expected change) is not carried: dv1, dv2
+        Vb = _cost_to_go(Qb, Kk, G, nx, sweep)
     a, b = -K[:, :, n], -K[:, :, :nx]
     Qu, Quu = Qu_rows[:, :, n], Qu_rows[:, :, nx:n]
     dv1 = np.einsum("ki,ki->", a, Qu)                       # sum_k a_k . Q_u,k
