@@ -34,7 +34,7 @@ t = time.process_time()
 problem = problem_from_case(case)
 u0 = case.cold_guess(problem.N)
 sol = solve(problem, u0, fuel_optimal=fuel, options=case_options(case, fuel,
-            time_budget_s=float(sys.argv[3])))
+            run=dict(time_budget_s=float(sys.argv[3]))))
 print(json.dumps({"cpu_s": round(time.process_time() - t, 1), "converged": sol.converged,
                   "final_mass_kg": None if case.spacecraft is None else round(sol.final_mass_kg, 3),
                   "reason": sol.reason[:120]}))

@@ -55,7 +55,7 @@ def main():
         for i in range(args.trials):
             for restore in warm:
                 planner, _ = nominal_planner(case, 600.0)
-                planner.policy = planner.policy.with_warm(restore_start=restore)
+                planner.policy = planner.policy.with_warm(start=dict(restore=restore))
                 p, v, m, t = perturbed_state(case, planner, np.random.default_rng(i), dr, dv)
                 out = planner.replan(p, v, m, t, f"w{i}", now_s=t)
                 warm[restore].append(out.solve_time_s * 1e3)

@@ -81,7 +81,8 @@ def run_one(job) -> dict:
     prob = problem_from_case(case, r_min_km=r_min_km)
     if peer:
         return run_peer(case, prob, U0, fuel, cap)
-    opts = case_options(case, fuel, time_budget_s=cap, globalization=globalization)
+    opts = case_options(case, fuel, run=dict(time_budget_s=cap),
+                        ddp=dict(globalization=globalization))
     t0 = time.process_time()
     try:
         sol = solve(prob, U0, method="dyn", fuel_optimal=fuel, options=opts)

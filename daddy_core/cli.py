@@ -90,8 +90,8 @@ def main(argv=None) -> int:
         if args.fuel:
             fuel = True
         problem = problem_from_case(case, stages=args.stages, r_min_km=args.r_min_km)
-        extra = {} if args.globalization is None else {"globalization": args.globalization}
-        opts = case_options(case, fuel, time_budget_s=args.time_budget, **extra)
+        ddp = {} if args.globalization is None else {"globalization": args.globalization}
+        opts = case_options(case, fuel, run=dict(time_budget_s=args.time_budget), ddp=ddp)
         if args.warm_start:
             u0 = Solution.from_json(args.warm_start).U
         else:

@@ -163,7 +163,7 @@ class GuidancePlanner:
                  deadline: float) -> _Attempt:
         """One solve of ``problem`` from ``guess`` (controls or a WarmStart) in the time left
         before ``deadline``, assessed."""
-        opts = opts.with_(time_budget_s=max(_left(deadline), MIN_SOLVE_BUDGET_S))
+        opts = opts.with_(run=dict(time_budget_s=max(_left(deadline), MIN_SOLVE_BUDGET_S)))
         sol = solve(problem, guess, method=self.method, fuel_optimal=None, polish=polish,
                     options=opts, case_name=self.case.name)
         return _Attempt(sol, problem, assess(sol, problem, self._feasibility_tol))
@@ -241,7 +241,7 @@ class GuidancePlanner:
     def _feasibility_tol(self) -> float:
         """Terminal constraints met to the solver's final tolerance (with slack)."""
         cold = self.policy.cold
-        return max(1e-8, 10 * cold.tol_newton) if self.config.polish else 10 * cold.tol_aul
+        return max(1e-8, 10 * cold.newton.tol) if self.config.polish else 10 * cold.aul.tol
 
     def _rung_for(self, U: np.ndarray) -> int:
         """The lowest rung of the margin ladder whose bound the controls U (K, 3) keep to."""

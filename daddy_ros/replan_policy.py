@@ -2,12 +2,15 @@
 of the arrival phase, and the thrust-margin ladder. ROS-free.
 
 A warm re-plan starts from a converged plan shifted to the new state (``shift``):
+The core names this preset (``SolverOptions.warm_replan``); why each of its settings:
 - it runs the last homotopy step only (the plan is fuel-optimal already), the tol_ddp test may
-  stop DDP after one iteration, and the penalty resumes high (WARM_MU_INIT) next to the carried
+  stop DDP after one iteration, and the penalty resumes high (``options.WARM_MU_INIT``) next
+  to the carried
   multipliers: with mu = 1 the first DDP pass trades the constraints away and the solve takes
   far longer;
-- shortened DDP steps raise the Quu damping instead of crawling (``short_step``), and rho
-  carries over between solves;
+- shortened DDP steps raise the Quu damping instead of crawling (``ddp.short_step``), and rho
+  carries over between solves; no per-stage trust region (one DDP step from a restored start:
+  a stage bound would only hold back its convergence test for another iteration);
 - ``restore_first``: Newton first restores feasibility from the plan's stage maps, so that a
   solve stopped by its time budget still flies a feasible plan from the new state;
 - a polished re-plan stops the AUL at WARM_TOL_AUL unless tol_aul is given: Newton takes the
@@ -16,11 +19,11 @@ A warm re-plan starts from a converged plan shifted to the new state (``shift``)
 - Newton treats inequalities within WARM_ACTIVE_TOL of their bound as active: the AUL leaves a
   fuel-optimal plan's full-thrust arcs slightly inside the bound, and with them inactive
   Newton's first minimum-norm step pushed them past it and the next ones pulled them back;
-- the stall rules of cold solves are off (``aul_stall_iter``, ``newton_stall_iter``): the
+- the stall rules of cold solves are off (``aul.stall_iter``, ``newton.stall_iter``): the
   penalty starts three growth steps below its cap, so "three solves at the cap" is no stall
   there, and a re-plan that cannot meet its target has the thrust-margin ladder and the last
   valid plan to fall back on;
-- the KKT residual is neither evaluated nor polished (``tol_optimality`` = inf): its
+- the KKT residual is neither evaluated nor polished (``kkt.tol`` = inf): its
   expansion of every stage and the KKT polishing's would cost a re-plan more than its whole
   latency target allows, and a re-plan starts next to a plan that was polished.
 The arrival phase (the re-gridded last stages) keeps the case's AUL tolerance, Newton active
@@ -32,7 +35,6 @@ plan that took the full rating at once has nothing left for the next execution e
 """
 from __future__ import annotations
 
-import math
 from dataclasses import dataclass, replace
 
 from daddy_core.catalogue import Case
@@ -40,8 +42,6 @@ from daddy_core.solver import SolverOptions, case_options
 
 from .config import PlannerConfig
 
-# augmented-Lagrangian penalty a warm-started re-optimisation starts from (cold: options' 1)
-WARM_MU_INIT = 1e5
 # augmented-Lagrangian tolerance of a polished warm re-optimisation without an explicit tol_aul
 WARM_TOL_AUL = 1e-5
 # a warm re-optimisation's Newton steps hold inequalities within this of their bound on it (the
@@ -70,27 +70,20 @@ class ReplanPolicy:
 
     @classmethod
     def of(cls, case: Case, config: PlannerConfig) -> "ReplanPolicy":
-        overrides = {}
+        aul, newton = {}, {}
         if config.tol_aul:
-            overrides["tol_aul"] = config.tol_aul
+            aul["tol"] = config.tol_aul
         if config.tol_newton:
-            overrides["tol_newton"] = config.tol_newton
-        cold = case_options(case, config.fuel_optimal, time_budget_s=config.time_budget_s,
-                            **overrides)
-        warm_tol_aul = config.tol_aul or (max(WARM_TOL_AUL, cold.tol_aul) if config.polish
-                                          else cold.tol_aul)
-        warm = cold.with_(homotopy=cold.homotopy[-1:], ddp_min_iter=1, mu_init=WARM_MU_INIT,
-                          short_step=0.5, carry_rho=True, aul_stall_iter=0,
-                          newton_stall_iter=0, tol_optimality=math.inf,
-                          restore_start=bool(config.restore_first), tol_aul=warm_tol_aul,
-                          polish_from_ddp_maps=True,
-                          newton_active_tol=max(WARM_ACTIVE_TOL, cold.newton_active_tol),
-                          # one DDP step from a restored start: a stage bound would only hold
-                          # back its convergence test for another iteration (Earth-Mars: 2
-                          # DDP iterations instead of 1, +23 % latency)
-                          stage_trust=False)
-        arrival = warm.with_(tol_aul=cold.tol_aul, polish_from_ddp_maps=False,
-                             newton_active_tol=cold.newton_active_tol)
+            newton["tol"] = config.tol_newton
+        cold = case_options(case, config.fuel_optimal, aul=aul, newton=newton,
+                            run=dict(time_budget_s=config.time_budget_s))
+        warm_tol_aul = config.tol_aul or (max(WARM_TOL_AUL, cold.aul.tol) if config.polish
+                                          else cold.aul.tol)
+        warm = SolverOptions.warm_replan(cold, warm_tol_aul, WARM_ACTIVE_TOL,
+                                         bool(config.restore_first))
+        arrival = warm.with_(aul=dict(tol=cold.aul.tol),
+                             newton=dict(polish_from_ddp_maps=False,
+                                         active_tol=cold.newton.active_tol))
         return cls(cold, warm, arrival)
 
     def options(self, warm: bool, arrival: bool) -> SolverOptions:
@@ -101,11 +94,12 @@ class ReplanPolicy:
 
     def with_time_budget(self, time_budget_s: float) -> "ReplanPolicy":
         """Every kind of solve with another wall-clock budget."""
-        return replace(self, **{k: getattr(self, k).with_(time_budget_s=time_budget_s)
+        return replace(self, **{k: getattr(self, k).with_(run=dict(time_budget_s=time_budget_s))
                                 for k in ("cold", "warm", "arrival")})
 
     def with_warm(self, **options) -> "ReplanPolicy":
-        """Warm re-plans (arrival phase included) with other solver options (experiments)."""
+        """Warm re-plans (arrival phase included) with other solver options, as
+        ``SolverOptions.with_`` takes them (experiments)."""
         return replace(self, warm=self.warm.with_(**options),
                        arrival=self.arrival.with_(**options))
 

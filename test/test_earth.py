@@ -141,7 +141,8 @@ def test_a_solution_lends_a_warm_start_the_multipliers_of_its_kkt_point(tof_days
     case = _raise_case(tof_days=tof_days)
     prob, sol = _solve(case)
     assert sol.converged, sol.reason
-    again = solve(prob, sol, options=case_options(case, False).with_(mu_init=1e3, ddp_min_iter=1))
+    again = solve(prob, sol, options=case_options(case, False).with_(aul=dict(mu_init=1e3),
+                                                                    ddp=dict(min_iter=1)))
     assert again.converged, again.reason
     assert again.iterations["aul"] == 1 and again.iterations["ddp"] == 1, again.iterations
     assert again.cost == pytest.approx(sol.cost, rel=1e-5)

@@ -48,7 +48,7 @@ def test_kkt_polishing_returns_to_the_optimum_feasible_and_never_costlier():
     prob, sol = _di_optimum()
     X2, U2 = _feasible_detour(prob, sol.U, 5e-2)
     start = optimality(prob, X2, U2, HOM)
-    opts = SolverOptions(tol_optimality=1e-8)
+    opts = SolverOptions(kkt=dict(tol=1e-8))
     res = kkt_polish(prob, X2, U2, HOM, opts, start)
     assert res.converged and res.iterations <= 3
     assert prob.violation(res.X, res.U) <= 1e-10
@@ -76,7 +76,7 @@ def test_a_kkt_step_that_cannot_be_flown_refuses_its_shift_not_the_polishing(mon
         return restore(problem, model, X, U, *args)
 
     monkeypatch.setattr(kp, "_restore", unflyable_first)
-    res = kkt_polish(prob, X2, U2, HOM, SolverOptions(tol_optimality=1e-8, kkt_max_iter=5), start)
+    res = kkt_polish(prob, X2, U2, HOM, SolverOptions(kkt=dict(tol=1e-8, max_iter=5)), start)
     assert len(calls) >= 2                                  # a larger shift was tried
     assert res.iterations >= 1 and prob.violation(res.X, res.U) <= 1e-10
     assert objective(prob, res.X, res.U, HOM) < objective(prob, X2, U2, HOM)
@@ -86,7 +86,7 @@ def test_a_kkt_step_that_cannot_be_flown_refuses_its_shift_not_the_polishing(mon
 def test_infinite_tolerance_neither_evaluates_nor_polishes():
     prob = problem_from_case(DI)
     sol = solve(prob, np.zeros((prob.N, 3)),
-                options=case_options(DI, False, tol_optimality=np.inf))
+                options=case_options(DI, False, kkt=dict(tol=np.inf)))
     assert sol.converged and sol.kkt_residual is None and sol.iterations["kkt"] == 0
 
 
@@ -97,9 +97,9 @@ def test_a_solve_that_cannot_reach_tol_optimality_says_so_and_keeps_its_best_ite
     case = load_case("earth_mars")
     prob = problem_from_case(case)
     u0 = np.full((prob.N, 3), float(case.units.thrust(case.solver["u_guess_n"])))
-    ddp = solve(prob, u0, options=case_options(case, False, tol_optimality=np.inf))
-    sol = solve(prob, u0, options=case_options(case, False, tol_optimality=1e-14,
-                                               kkt_max_iter=1, kkt_resolves=0))
+    ddp = solve(prob, u0, options=case_options(case, False, kkt=dict(tol=np.inf)))
+    sol = solve(prob, u0, options=case_options(case, False, kkt=dict(tol=1e-14, max_iter=1),
+                                               end_game=dict(resolves=0)))
     assert not sol.converged and "KKT residual" in sol.reason and "kkt_max_iter" in sol.reason
     assert sol.max_violation <= 1e-10 and np.all(np.isfinite(sol.U))
     assert sol.cost <= ddp.cost and sol.iterations["kkt"] == 1
@@ -118,7 +118,8 @@ def test_a_stalled_kkt_polishing_hands_the_last_homotopy_step_back_to_ddp(fuel):
     case = load_case("earth_mars")
     prob = problem_from_case(case)
     runs = {n: solve(prob, None, fuel_optimal=fuel, options=case_options(
-        case, fuel, kkt_max_iter=0, kkt_resolves=n, exact_fuel=False)) for n in (0, 1, 3)}
+        case, fuel, kkt=dict(max_iter=0), end_game=dict(resolves=n, exact_fuel=False)))
+        for n in (0, 1, 3)}
     for n, sol in runs.items():
         assert sol.max_violation <= 1e-10 and np.all(np.isfinite(sol.U))
         assert sum(bool(h.get("resolve")) for h in sol.history) == (0 if n == 0 else

@@ -194,9 +194,9 @@ def test_one_budget_for_the_whole_replan_ladder_included(monkeypatch):
     budgets, real_solve = [], planner_mod.solve
 
     def slow_solve(problem, guess, options, **kw):
-        budgets.append(options.time_budget_s)
+        budgets.append(options.run.time_budget_s)
         sol = real_solve(problem, guess, options=options, **kw)
-        time.sleep(max(0.0, options.time_budget_s))   # spends whatever it was given
+        time.sleep(max(0.0, options.run.time_budget_s))   # spends whatever it was given
         return sol
 
     monkeypatch.setattr(planner_mod, "solve", slow_solve)
@@ -323,17 +323,17 @@ def test_warm_replans_loosen_the_aul_tolerance_except_in_the_arrival_phase(monke
     import daddy_ros.planner as planner_mod
     from daddy_ros.replan_policy import WARM_ACTIVE_TOL, WARM_TOL_AUL
     pl = GuidancePlanner("earth_mars")
-    case_tol, case_active = pl.policy.cold.tol_aul, pl.policy.cold.newton_active_tol
-    assert case_tol < WARM_TOL_AUL and pl.policy.warm.tol_aul == WARM_TOL_AUL
-    assert case_active < WARM_ACTIVE_TOL == pl.policy.warm.newton_active_tol
-    assert GuidancePlanner("earth_mars", tol_aul=2e-6).policy.warm.tol_aul == 2e-6
-    assert GuidancePlanner("earth_mars", polish=False).policy.warm.tol_aul == case_tol
+    case_tol, case_active = pl.policy.cold.aul.tol, pl.policy.cold.newton.active_tol
+    assert case_tol < WARM_TOL_AUL and pl.policy.warm.aul.tol == WARM_TOL_AUL
+    assert case_active < WARM_ACTIVE_TOL == pl.policy.warm.newton.active_tol
+    assert GuidancePlanner("earth_mars", tol_aul=2e-6).policy.warm.aul.tol == 2e-6
+    assert GuidancePlanner("earth_mars", polish=False).policy.warm.aul.tol == case_tol
     seen = []
     real_solve = planner_mod.solve
 
     def recording_solve(problem, *args, **kw):
         o = kw["options"]
-        seen.append((problem.N, o.tol_aul, o.polish_from_ddp_maps, o.newton_active_tol))
+        seen.append((problem.N, o.aul.tol, o.newton.polish_from_ddp_maps, o.newton.active_tol))
         return real_solve(problem, *args, **kw)
 
     monkeypatch.setattr(planner_mod, "solve", recording_solve)

@@ -65,7 +65,7 @@ def test_earth_mars_energy_dyn_matches_reference_oracle():
     assert np.max(np.abs(thrust - ref[:, 12])) < 2e-5
     assert sol.final_mass_kg == pytest.approx(m_final, abs=1e-3)
     assert np.all(thrust <= 0.5 * (1 + 1e-9))
-    unpolished = solve_case("earth_mars", "dyn", tol_optimality=np.inf)
+    unpolished = solve_case("earth_mars", "dyn", kkt=dict(tol=np.inf))
     assert unpolished.converged and unpolished.kkt_residual is None
     assert np.max(np.abs(np.linalg.norm(unpolished.thrust_n, axis=1) - ref[:, 12])) > 1e-4
 
@@ -147,7 +147,7 @@ def test_stage_maps_roll_out_and_restore_like_integration():
     assert served > prob.N // 2
     assert np.max(np.abs(X_dyn - X_int)) < 1e-4                # within eps_da per stage
     _, inside = maps.deviation(X_int, U)
-    _, inside10 = maps.deviation(X_int, U, reach=10.0)         # SolverOptions.map_reach
+    _, inside10 = maps.deviation(X_int, U, reach=10.0)         # SolverOptions.newton.map_reach
     assert inside.sum() < inside10.sum() and np.all(inside10[inside])
     X_far, served_far = maps.rollout(prob, U, reach=10.0)      # a start for the restoration
     assert served_far > served and np.max(np.abs(X_far - X_int)) < 1e-8   # (measured 6e-13)
@@ -158,7 +158,7 @@ def test_stage_maps_roll_out_and_restore_like_integration():
     fresh = polish(moved, X0, plan.U, opts)
     reused = polish(moved, X0, plan.U, opts, maps=maps)
     assert fresh.converged and reused.converged
-    assert reused.max_violation <= opts.tol_newton
+    assert reused.max_violation <= opts.newton.tol
     assert isinstance(reused.maps, StageMaps)
 
 
@@ -182,8 +182,8 @@ def test_weighted_newton_steps_keep_coasting_arcs_and_converge_in_one_iteration(
     # on their mass-flow model error; steps weighted by the thrust level do not
     from daddy_core.solver.newton import BandedSigma, ConstraintModel, column_weights, polish
     plan, moved, X0, opts = _earth_mars_plan_moved(1e6, 1.0)
-    assert opts.newton_control_weight_floor == 1e-2            # the default
-    plain = polish(moved, X0, plan.U, opts.with_(newton_control_weight_floor=0.0))
+    assert opts.newton.control_weight_floor == 1e-2            # the default
+    plain = polish(moved, X0, plan.U, opts.with_(newton=dict(control_weight_floor=0.0)))
     weighted = polish(moved, X0, plan.U, opts)
     assert plain.converged and weighted.converged
     assert weighted.iterations <= 2 < plain.iterations
@@ -193,10 +193,10 @@ def test_weighted_newton_steps_keep_coasting_arcs_and_converge_in_one_iteration(
                 for name, r in (("plain", plain), ("weighted", weighted))}
     assert moved_by["weighted"] < 0.1 * moved_by["plain"]
     # the weighted step solves the same linearised constraints: D dY = -d
-    model = ConstraintModel(moved, X0, plan.U, opts.newton_active_tol)
+    model = ConstraintModel(moved, X0, plan.U, opts.newton.active_tol)
     d = model.residual()
     scale = column_weights(moved, plan.U, 1e-2)
-    dY = BandedSigma(model.D, opts.newton_regularisation, scale).step(d)
+    dY = BandedSigma(model.D, opts.newton.regularisation, scale).step(d)
     np.testing.assert_allclose(model.D @ dY, -d, atol=1e-9 * np.max(np.abs(d)))
     assert column_weights(moved, plan.U, 0.0) is None
     assert column_weights(problem_from_case(DI), np.ones((11, 3)), 1e-2) is None
@@ -213,9 +213,9 @@ def test_newton_corrects_a_step_that_its_second_order_term_undoes(dr_m, dv_m_s, 
     from daddy_core.solver.newton import (BandedSigma, ConstraintModel, _corrected,
                                           _inner_iterations, column_weights)
     plan, moved, X0, opts = _earth_mars_plan_moved(dr_m, dv_m_s)
-    model = ConstraintModel(moved, X0, plan.U, opts.newton_active_tol)
-    sigma = BandedSigma(model.D, opts.newton_regularisation,
-                        column_weights(moved, plan.U, opts.newton_control_weight_floor))
+    model = ConstraintModel(moved, X0, plan.U, opts.newton.active_tol)
+    sigma = BandedSigma(model.D, opts.newton.regularisation,
+                        column_weights(moved, plan.U, opts.newton.control_weight_floor))
     d = model.residual()
     dmax = np.max(np.abs(d))
     step = sigma.step(d)
@@ -274,14 +274,14 @@ def test_infeasible_mass_bound():
 
 
 def test_options_are_validated():
-    with pytest.raises(DaddyError, match="tol_ddp"):
-        SolverOptions(tol_ddp=-1.0)
+    with pytest.raises(DaddyError, match="options.ddp.tol"):
+        SolverOptions(ddp=dict(tol=-1.0))
     with pytest.raises(DaddyError, match="homotopy"):
         SolverOptions(homotopy=((2.0, 0.1),))
-    with pytest.raises(DaddyError, match="newton_control_weight_floor"):
-        SolverOptions(newton_control_weight_floor=2.0)
-    with pytest.raises(DaddyError, match="tol_optimality"):
-        SolverOptions(tol_optimality=0.0)
+    with pytest.raises(DaddyError, match="options.newton.control_weight_floor"):
+        SolverOptions(newton=dict(control_weight_floor=2.0))
+    with pytest.raises(DaddyError, match="options.kkt.tol"):
+        SolverOptions(kkt=dict(tol=0.0))
 
 
 @pytest.mark.parametrize("nu", [1, 2, 3, 4])
@@ -488,11 +488,11 @@ def test_an_infeasible_problem_fails_fast_and_names_the_constraints_it_cannot_me
     # the augmented Lagrangian says it stalled (penalty at its cap, violation not falling)
     # instead of running its aul_max_iter iterations, and the polishing stops as fast
     assert "stalled with the penalty at mu_max" in sol.reason
-    assert sol.iterations["aul"] < SolverOptions().aul_max_iter
+    assert sol.iterations["aul"] < SolverOptions().aul.max_iter
     # (by its stall or no-descent rule, far from its newton_max_iter), and so does the
-    # restoration of the start (SolverOptions.restore_start), which DDP then does without
-    assert sol.iterations["newton"] <= 2 * SolverOptions().newton_stall_iter
-    assert 0 < sol.iterations["restore"] <= SolverOptions().newton_stall_iter + 1
+    # restoration of the start (SolverOptions.start.restore), which DDP then does without
+    assert sol.iterations["newton"] <= 2 * SolverOptions().newton.stall_iter
+    assert 0 < sol.iterations["restore"] <= SolverOptions().newton.stall_iter + 1
     assert sol.violations[0]["name"] == "g_teq[0]" and sol.violations[0]["stage"] is None
     again = Solution.from_json(sol.to_json())
     assert again.violations == sol.violations
@@ -555,7 +555,7 @@ def test_nonlinear_terminal_constraints_from_a_cold_start_against_slsqp():
     sol = solve(prob, np.full((N, 2), 1e-3))
     assert sol.converged and sol.max_violation <= 1e-10 and sol.kkt_residual <= 1e-4
     assert sol.cost == pytest.approx(ref.fun, rel=1e-7)
-    ddp_only = solve(prob, np.full((N, 2), 1e-3), options=SolverOptions(tol_optimality=np.inf))
+    ddp_only = solve(prob, np.full((N, 2), 1e-3), options=SolverOptions(kkt=dict(tol=np.inf)))
     assert ddp_only.converged and ddp_only.cost > ref.fun * (1 + 1e-4)
     assert optimality(prob, ddp_only.X, ddp_only.U, (0.0, 1e-2)).kkt_residual > 1e-4
 
@@ -568,7 +568,7 @@ def test_a_trial_step_dividing_by_zero_mass_is_rejected_not_raised():
     case = load_case("earth_mars")
     prob = problem_from_case(case, stages=1)
     sol = solve(prob, np.zeros((1, 3)), fuel_optimal=True,
-                options=case_options(case, True, time_budget_s=3.0))
+                options=case_options(case, True, run=dict(time_budget_s=3.0)))
     assert not sol.converged and sol.reason
     assert np.all(np.isfinite(sol.X)) and np.all(np.isfinite(sol.U))
 
@@ -602,13 +602,13 @@ def test_trust_region_reaches_the_same_optima_as_the_line_search(stages):
     far too long there) at two stage counts, against its closed form."""
     from daddy_core.da import functions as dm
     for method in ("std", "dyn", "qdyn"):
-        sol = solve_case("double_integrator", method, globalization="trust_region")
+        sol = solve_case("double_integrator", method, ddp=dict(globalization="trust_region"))
         assert sol.converged, sol.reason
         assert sol.cost == pytest.approx(di_closed_form(), rel=1e-9)
     prob = _landing(stage_dt=np.full(stages, 80.0 / stages),
                     stage_cost=lambda x, u, dt, hom: u[0] * 0.0,
                     g_ineq=lambda x, u, dt: dm.stack([u[0] - 45.0, -u[0]]))
-    runs = [solve(prob, np.full((stages, 1), 16.0), options=SolverOptions(globalization=g))
+    runs = [solve(prob, np.full((stages, 1), 16.0), options=SolverOptions(ddp=dict(globalization=g)))
             for g in ("line_search", "trust_region")]
     # the rocket equation: every thrust history that lands in T ends at the same mass
     closed_form = 10.0 * np.exp(-(30.0 + 1.62 * 80.0) / 3000.0)
@@ -618,7 +618,7 @@ def test_trust_region_reaches_the_same_optima_as_the_line_search(stages):
 
 
 def test_a_line_search_at_its_iteration_bound_falls_back_to_the_trust_region(capsys):
-    """``SolverOptions.tr_fallback``: a line-search DDP solve that runs into ddp_max_iter is
+    """``SolverOptions.aul.tr_fallback``: a line-search DDP solve that runs into ddp_max_iter is
     solved again with the trust region, which the rest of the solve keeps; the landing with a
     cost linear in the control still reaches its closed-form mass (and without the fallback
     too: the switch changes the path, not the answer)."""
@@ -628,7 +628,8 @@ def test_a_line_search_at_its_iteration_bound_falls_back_to_the_trust_region(cap
     closed_form = 10.0 * np.exp(-(30.0 + 1.62 * 80.0) / 3000.0)
     for fallback in (True, False):
         sol = solve(prob, np.full((17, 1), 16.0),
-                    options=SolverOptions(ddp_max_iter=3, tr_fallback=fallback, verbose=True))
+                    options=SolverOptions(ddp=dict(max_iter=3), aul=dict(tr_fallback=fallback),
+                                          run=dict(verbose=True)))
         fell_back = "again from its start with the trust region" in capsys.readouterr().out
         assert fell_back is fallback
         assert sol.converged and sol.max_violation <= 1e-10, sol.reason
@@ -636,7 +637,7 @@ def test_a_line_search_at_its_iteration_bound_falls_back_to_the_trust_region(cap
 
 
 def test_a_cold_start_is_restored_to_feasibility_before_ddp(capsys):
-    """``SolverOptions.restore_start`` (default on): Newton drives a random guess to the
+    """``SolverOptions.start.restore`` (default on): Newton drives a random guess to the
     terminal constraints and the thrust bound before DDP starts; the answer is the closed form
     with and without it (the restoration changes where DDP starts, not the optimum)."""
     case = load_case("double_integrator")
@@ -644,8 +645,8 @@ def test_a_cold_start_is_restored_to_feasibility_before_ddp(capsys):
     U0 = np.random.default_rng(7).uniform(-1.0, 1.0, size=(prob.N, prob.nu))
     sols = {}
     for restore in (True, False):
-        sols[restore] = solve(prob, U0, options=case_options(case, False, verbose=True,
-                                                              restore_start=restore))
+        sols[restore] = solve(prob, U0, options=case_options(case, False, run=dict(verbose=True),
+                                                              start=dict(restore=restore)))
         out = capsys.readouterr().out
         restored = [line for line in out.splitlines() if "start restored by Newton" in line]
         assert len(restored) == int(restore)
@@ -679,7 +680,7 @@ def test_a_cold_guess_newton_cannot_restore_falls_back_to_the_restored_ballistic
     em_prob = problem_from_case(em)
     lines.clear()
     solve(em_prob, np.full((em_prob.N, em_prob.nu), float(em.units.thrust(1e-6))),
-          options=case_options(em, False, time_budget_s=5.0), progress=lines.append)
+          options=case_options(em, False, run=dict(time_budget_s=5.0)), progress=lines.append)
     assert any("start not restored by Newton" in line for line in lines)   # it stalls ...
     assert not any("ballistic" in line for line in lines)   # ... and is not repeated
 
@@ -746,11 +747,11 @@ def test_newtons_backtracking_picks_the_step_a_trial_by_trial_search_picks():
 
     def one_by_one(model, dY, step, dmax, opts):
         alpha = 1.0
-        for _ in range(opts.newton_ls_max_halvings):
+        for _ in range(opts.newton.ls_max_halvings):
             cand = model.residual(dY + alpha * step)
             if np.max(np.abs(cand)) < dmax:
                 return alpha, cand
-            alpha *= opts.newton_ls_shrink
+            alpha *= opts.newton.ls_shrink
         return None
 
     rng = np.random.default_rng(3)
@@ -760,9 +761,9 @@ def test_newtons_backtracking_picks_the_step_a_trial_by_trial_search_picks():
         prob, opts = problem_from_case(case), case_options(case, True)
         U = float(case.units.thrust(1e-6)) + 0.3 * prob.u_max * rng.uniform(-1, 1, (prob.N, 3))
         X = prob.rollout(U)
-        model = newton.ConstraintModel(prob, X, U, opts.newton_active_tol)
+        model = newton.ConstraintModel(prob, X, U, opts.newton.active_tol)
         sigma = newton._factorise(model, newton.column_weights(
-            prob, U, opts.newton_control_weight_floor), opts.newton_regularisation)
+            prob, U, opts.newton.control_weight_floor), opts.newton.regularisation)
         dY, d = np.zeros(model.D.shape[1]), model.residual()
         for _ in range(6):   # the inner iterations' first steps, as _inner_iterations takes them
             dmax, step = float(np.max(np.abs(d))), sigma.step(d)
@@ -801,7 +802,7 @@ def test_each_homotopy_step_starts_from_the_multipliers_estimated_at_the_last_so
     monkeypatch.setattr(homotopy, "aul", spy)
     case = load_case("halo_l2_l1")
     prob = problem_from_case(case)
-    opts = case_options(case, True, exact_fuel=False)
+    opts = case_options(case, True, end_game=dict(exact_fuel=False))
     sol = solve(prob, np.full((prob.N, 3), float(case.units.thrust(1e-6))), fuel_optimal=True,
                 options=opts)   # (the whole homotopy)
     assert sol.converged, sol.reason
@@ -813,7 +814,7 @@ def test_each_homotopy_step_starts_from_the_multipliers_estimated_at_the_last_so
         lam, lam_t, mu, mu_t = starts[k]
         assert np.array_equal(lam, want.lam) and np.array_equal(lam_t, want.lam_t), k
         assert not np.array_equal(lam_t, prev.mult.lam_t), k   # (the update moved them)
-        assert np.all(mu == opts.mu_init) and np.all(mu_t == opts.mu_init), k
+        assert np.all(mu == opts.aul.mu_init) and np.all(mu_t == opts.aul.mu_init), k
     assert sol.final_mass_kg == pytest.approx(973.941, abs=2e-3)
 
 
@@ -859,7 +860,7 @@ def test_a_feasible_iterate_whose_ddp_solve_ran_into_its_bound_gets_one_more_sol
     opts = SolverOptions()
     bound, done = (SimpleNamespace(status=s) for s in (Status.DDP_MAX_ITER,
                                                        Status.DDP_CONVERGED))
-    feasible, infeasible = 0.5 * opts.tol_aul, 2.0 * opts.tol_aul
+    feasible, infeasible = 0.5 * opts.aul.tol, 2.0 * opts.aul.tol
     assert _ends_feasible(done, feasible, False, opts)
     assert not _ends_feasible(done, infeasible, False, opts)
     assert not _ends_feasible(bound, feasible, False, opts)
@@ -876,7 +877,7 @@ def test_a_ddp_solve_whose_steps_stay_cut_short_without_progress_has_stalled():
     from daddy_core.solver.results import Status
     from daddy_core.solver.stopping import Stopping, crawling as _crawling
     opts = SolverOptions()
-    k = opts.ddp_stall_iter
+    k = opts.ddp.stall_iter
 
     def run(fractions, rel):
         steps, J = [(1e8, 1.0)], 1e8
@@ -889,9 +890,9 @@ def test_a_ddp_solve_whose_steps_stay_cut_short_without_progress_has_stalled():
     assert _crawling(run([0.5] * 5 + [7.6e-6] * k, 1e-6), opts)   # the last k count
     assert not _crawling(run([7.6e-6] * (k - 1), 1e-6), opts)       # too few to tell
     assert not _crawling(run([7.6e-6] * (k // 2) + [0.5] + [7.6e-6] * (k // 2), 1e-6), opts)
-    assert not _crawling(run([7.6e-6] * k, 10 * opts.tol_ddp), opts)   # short but progressing
+    assert not _crawling(run([7.6e-6] * k, 10 * opts.ddp.tol), opts)   # short but progressing
     assert not _crawling(run([0.5] * k, 1e-6), opts)   # full steps: DDP's own test decides
-    assert not _crawling(run([7.6e-6] * k, 1e-6), SolverOptions(ddp_stall_iter=0))
+    assert not _crawling(run([7.6e-6] * k, 1e-6), SolverOptions(ddp=dict(stall_iter=0)))
     # the trust-region retry of a failed line search: rejections after its first accepted step
     # are steps of length zero; before it, the region is still shrinking to where the model holds
     shrinking = Stopping(opts, True, [(1e8, 1.0)])
@@ -940,11 +941,12 @@ def test_a_solve_that_diverges_from_a_random_guess_says_so_and_returns_its_start
 
 def test_globalization_is_validated():
     from daddy_core.solver import Globalization
-    assert SolverOptions(globalization="trust_region").globalization is Globalization.TRUST_REGION
-    with pytest.raises(DaddyError, match="options.globalization"):
-        SolverOptions(globalization="dogleg")
-    with pytest.raises(DaddyError, match="options.tr_kappa"):
-        SolverOptions(tr_kappa=1.0)
+    assert (SolverOptions(ddp=dict(globalization="trust_region")).ddp.globalization
+            is Globalization.TRUST_REGION)
+    with pytest.raises(DaddyError, match="options.ddp.globalization"):
+        SolverOptions(ddp=dict(globalization="dogleg"))
+    with pytest.raises(DaddyError, match="options.ddp.tr_kappa"):
+        SolverOptions(ddp=dict(tr_kappa=1.0))
 
 
 def _first_step_across_a_bound(bound: float):
@@ -982,7 +984,7 @@ def test_a_line_search_that_fails_at_a_few_stages_bounds_those_stages_only():
     from daddy_core.solver import globalization as G
     from daddy_core.solver import sweeps as D
 
-    tol = SolverOptions().tol_ddp
+    tol = SolverOptions().ddp.tol
     prob, st, gains, trial, stage_costs, expected, actual = _first_step_across_a_bound(0.55)
     assert actual < 0                                    # the full step fails
     crossed = np.flatnonzero(np.abs(trial.U[:, 0]) > 0.55)
@@ -995,8 +997,8 @@ def test_a_line_search_that_fails_at_a_few_stages_bounds_those_stages_only():
     np.testing.assert_allclose(np.abs(clamped.U[blamed, 0]), bounds[blamed])
     free = np.setdiff1d(np.arange(prob.N), blamed)
     assert np.all(np.abs(clamped.dz[prob.nx:, free]) > 0)
-    a = solve(prob, st.U, options=SolverOptions(stage_trust=True))
-    b = solve(prob, st.U, options=SolverOptions(stage_trust=False))
+    a = solve(prob, st.U, options=SolverOptions(ddp=dict(stage_trust=True)))
+    b = solve(prob, st.U, options=SolverOptions(ddp=dict(stage_trust=False)))
     assert a.converged and b.converged
     np.testing.assert_allclose(a.U, b.U, atol=1e-6)
     assert np.max(np.abs(a.U)) <= 0.55 * (1 + 1e-9)
@@ -1016,12 +1018,12 @@ def test_a_trust_region_step_that_fails_at_a_few_stages_bounds_those_stages_only
 
     prob, st, gains, trial, *_ = _first_step_across_a_bound(0.55)
     crossed = np.flatnonzero(np.abs(trial.U[:, 0]) > 0.55)
-    opts = SolverOptions(globalization="trust_region")
+    opts = SolverOptions(ddp=dict(globalization="trust_region"))
     out = G.trust_region_step(st, gains, False, opts, st.cost)
     assert isinstance(out, G.Blame) and set(out.stages) <= set(crossed)
-    assert G.trust_region_step(st, gains, False, opts.with_(stage_trust=False), st.cost) is None
+    assert G.trust_region_step(st, gains, False, opts.with_(ddp=dict(stage_trust=False)), st.cost) is None
     ref = solve(prob, st.U)
     for stage_trust in (True, False):
-        sol = solve(prob, st.U, options=opts.with_(stage_trust=stage_trust))
+        sol = solve(prob, st.U, options=opts.with_(ddp=dict(stage_trust=stage_trust)))
         assert sol.converged, sol.reason
         np.testing.assert_allclose(sol.U, ref.U, atol=1e-6)

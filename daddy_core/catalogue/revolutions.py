@@ -85,7 +85,7 @@ def search_revolutions(case: Case, fuel_optimal: bool = False, span: float = 2.0
         t = time.process_time()
         sol = solve(problem, u0, method=method, fuel_optimal=fuel_optimal, options=opts,
                     case_name=case.name)
-        ok = sol.max_violation <= FEASIBLE * opts.tol_newton
+        ok = sol.max_violation <= FEASIBLE * opts.newton.tol
         solved[revs] = sol if ok else None
         trials.append(RevolutionTrial(revs, problem.N, sol.final_mass_kg if ok else None,
                                       sol.converged, time.process_time() - t))

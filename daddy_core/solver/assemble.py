@@ -132,21 +132,21 @@ def _verdict(ctx: SolveContext, game: Game, gmax: float, miss: float | None,
     to tol_aul), the re-propagation, the KKT residual (polished solves: to tol_optimality)."""
     opts, end = ctx.opts, game.end
     converged, reason = end.converged, end.reason
-    if not ctx.polish and not gmax <= opts.tol_aul:   # (NaN: not converged)
+    if not ctx.polish and not gmax <= opts.aul.tol:   # (NaN: not converged)
         converged = False
     if miss is not None and not math.isfinite(miss):
         converged, reason = False, "the DOP853 re-propagation of the final controls failed"
     if not converged:   # say which constraints the returned iterate does not meet
-        worst = [r for r in violations[:3] if r["violation"] > opts.tol_newton]
+        worst = [r for r in violations[:3] if r["violation"] > opts.newton.tol]
         if worst:
             reason += "; largest violations: " + ", ".join(_describe(r) for r in worst)
     opt = end.optimality
-    if ctx.polish and converged and math.isfinite(opts.tol_optimality) and (
-            opt is None or opt.kkt_residual > opts.tol_optimality):
+    if ctx.polish and converged and math.isfinite(opts.kkt.tol) and (
+            opt is None or opt.kkt_residual > opts.kkt.tol):
         converged = False
         reason = ("the KKT residual could not be evaluated" if opt is None else
                   f"KKT residual {opt.kkt_residual:.2e} above tol_optimality "
-                  f"{opts.tol_optimality:g} after {ctx.work.kkt} KKT iterations "
+                  f"{opts.kkt.tol:g} after {ctx.work.kkt} KKT iterations "
                   f"({end.kkt_reason})")
     return converged, reason
 
@@ -203,9 +203,9 @@ def duals(problem: Problem, X, U, opt: Optimality | None, hres: HomotopyResult,
         return hres.mult.as_duals()
     lam, lam_t = split
     if nc:
-        lam[:ni][g[:ni] < -opts.newton_active_tol] = 0.0
+        lam[:ni][g[:ni] < -opts.newton.active_tol] = 0.0
     if nt:
-        lam_t[:nti][gt[:nti] < -opts.newton_active_tol] = 0.0
+        lam_t[:nti][gt[:nti] < -opts.newton.active_tol] = 0.0
     if form is not None:
         lam = form.stage_duals(lam)
     return {"lam": lam.tolist(), "lam_t": lam_t.tolist()}

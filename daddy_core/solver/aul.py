@@ -36,10 +36,10 @@ def update_multipliers(mult: Multipliers, g, gt, opts: SolverOptions) -> Multipl
     if gt is not None:
         lam_t = lam_t + mult.mu_t * gt
         lam_t[:mult.n_tineq] = np.maximum(lam_t[:mult.n_tineq], 0.0)
-    clip = opts.lambda_max
-    return Multipliers(np.clip(lam, -clip, clip), np.minimum(mult.mu * opts.mu_growth, opts.mu_max),
+    clip = opts.aul.lambda_max
+    return Multipliers(np.clip(lam, -clip, clip), np.minimum(mult.mu * opts.aul.mu_growth, opts.aul.mu_max),
                        np.clip(lam_t, -clip, clip),
-                       np.minimum(mult.mu_t * opts.mu_growth, opts.mu_max),
+                       np.minimum(mult.mu_t * opts.aul.mu_growth, opts.aul.mu_max),
                        mult.n_ineq, mult.n_tineq)
 
 
@@ -47,20 +47,20 @@ def aul(st: Stages, method: Method, opts: SolverOptions, stats: DDPStats,
         deadline: float | None = None, progress=None, rho0: float | None = None) -> AULResult:
     """Alg. 4 from the expanded nominal ``st`` (its multipliers and homotopy point): DDP on the
     augmented cost, multiplier and penalty updates (eq. 9), until the maximum constraint
-    violation is below tol_aul. rho0: Quu regularisation to start from (None: opts.rho_init);
-    with opts.carry_rho each DDP solve resumes from the previous one's (the trust-region radius
+    violation is below tol_aul. rho0: Quu regularisation to start from (None: opts.ddp.rho_init);
+    with opts.ddp.carry_rho each DDP solve resumes from the previous one's (the trust-region radius
     always does). Stops early when the penalty can do no more (``safe.stalled``) or when its
     first DDP solve diverged (``safe.diverged``: the loop then returns its start)."""
     problem, mult, hom, start = st.problem, st.mult, st.hom, st
     gains, gmax = None, np.inf
-    rho, rho_last, radius = rho0, opts.rho_init if rho0 is None else rho0, math.inf
+    rho, rho_last, radius = rho0, opts.ddp.rho_init if rho0 is None else rho0, math.inf
     history, capped = [], 0   # max violation after each DDP solve; solves at mu_max in a row
     cut_off = False           # the last DDP solve ran into ddp_max_iter at a feasible point
-    for it in range(1, opts.aul_max_iter + 1):
+    for it in range(1, opts.aul.max_iter + 1):
         res, both_cut_off, opts = _ddp_solve(st, method, opts, stats, deadline, rho, radius,
                                              progress, it)
         radius, rho_last, gains = res.radius, res.rho, res.gains or gains
-        rho = res.rho if opts.carry_rho else rho0
+        rho = res.rho if opts.ddp.carry_rho else rho0
         st = safe.without_drift(res.stages, opts, deadline) if method.dyn else res.stages
         g, ni, gt, nti = problem.constraint_values(st.X, st.U)
         gmax = largest(max_violation(g, ni), max_violation(gt, nti))
@@ -77,7 +77,7 @@ def aul(st: Stages, method: Method, opts: SolverOptions, stats: DDPStats,
         elif safe.ends_feasible(res, gmax, cut_off, opts):
             status = Status.AUL_CONVERGED
         else:
-            cut_off = gmax <= opts.tol_aul   # (feasible and not ended: DDP hit its bound)
+            cut_off = gmax <= opts.aul.tol   # (feasible and not ended: DDP hit its bound)
             history.append(gmax)
             capped = capped + 1 if safe.at_cap(mult, opts) else 0   # this solve's penalty
             if safe.stalled(history, capped, opts):
@@ -87,7 +87,7 @@ def aul(st: Stages, method: Method, opts: SolverOptions, stats: DDPStats,
                              rho_last, gains)
         mult = update_multipliers(mult, g, gt, opts)
         st = st.with_costs(mult, hom)
-    return AULResult(False, opts.aul_max_iter, Status.AUL_MAX_ITER, st, mult, gmax, rho_last,
+    return AULResult(False, opts.aul.max_iter, Status.AUL_MAX_ITER, st, mult, gmax, rho_last,
                      gains)
 
 

@@ -30,14 +30,14 @@ DIVERGED_GROWTH = 100.0
 def fallback_options(res, opts: SolverOptions) -> SolverOptions | None:
     """The options to solve again with -- the trust region, at a ratio tolerance of at least
     ``FALLBACK_RATIO_TOL`` -- after a line-search DDP solve that ran into ddp_max_iter or
-    stalled (``SolverOptions.tr_fallback``), or None. The rest of that AUL loop (one homotopy
+    stalled (``SolverOptions.aul.tr_fallback``), or None. The rest of that AUL loop (one homotopy
     step) keeps them; the next step starts with the line search again. Rationale: the trust
     region accepts only steps its model predicts, where the line search's path can leave it."""
-    if not (opts.tr_fallback and res.status in CUT_OFF
-            and opts.globalization is Globalization.LINE_SEARCH):
+    if not (opts.aul.tr_fallback and res.status in CUT_OFF
+            and opts.ddp.globalization is Globalization.LINE_SEARCH):
         return None
-    return opts.with_(globalization=Globalization.TRUST_REGION,
-                      tr_ratio_tol=max(opts.tr_ratio_tol, FALLBACK_RATIO_TOL))
+    return opts.with_(ddp=dict(globalization=Globalization.TRUST_REGION,
+                               tr_ratio_tol=max(opts.ddp.tr_ratio_tol, FALLBACK_RATIO_TOL)))
 
 
 def without_drift(st: Stages, opts: SolverOptions, deadline: float | None) -> Stages:
@@ -68,7 +68,7 @@ def ends_feasible(res, gmax: float, after_cut_off: bool, opts: SolverOptions) ->
     stopping test -- or when the solve before it (``after_cut_off``) also ran into its bound
     at a feasible point. Alg. 4 assumes its inner solves converged: a solve cut off by its
     bound is not optimal, so the loop gives DDP one more solve from there."""
-    if not gmax <= opts.tol_aul:   # (NaN: not feasible, as Alg. 4's test before this one)
+    if not gmax <= opts.aul.tol:   # (NaN: not feasible, as Alg. 4's test before this one)
         return False
     return res.status not in CUT_OFF or after_cut_off
 
@@ -79,18 +79,18 @@ def diverged(gmax: float, gmax_start: float, both_cut_off: bool, opts: SolverOpt
     converged (``both_cut_off``), and the max violation ended ``DIVERGED_GROWTH`` times the
     start's or more: raising the penalty would restart DDP further off than the guess. A
     restored (feasible) start never counts: leaving it is the penalty's normal trade."""
-    return (both_cut_off and gmax_start > opts.tol_aul
+    return (both_cut_off and gmax_start > opts.aul.tol
             and gmax >= DIVERGED_GROWTH * gmax_start)
 
 
 def at_cap(mult: Multipliers, opts: SolverOptions) -> bool:
     """Every penalty at mu_max."""
-    return (float(np.min(mult.mu, initial=np.inf)) >= opts.mu_max
-            and float(np.min(mult.mu_t, initial=np.inf)) >= opts.mu_max)
+    return (float(np.min(mult.mu, initial=np.inf)) >= opts.aul.mu_max
+            and float(np.min(mult.mu_t, initial=np.inf)) >= opts.aul.mu_max)
 
 
 def stalled(history: list, capped: int, opts: SolverOptions) -> bool:
     """The augmented Lagrangian has stalled: the last ``aul_stall_iter`` DDP solves ran with
     the penalty at mu_max (``capped`` solves in a row did) and the max violation fell by less
     than half over them (an infeasible problem, or a local minimiser of the violation)."""
-    return opts.aul_stall_iter <= capped and not_halved(history, opts.aul_stall_iter)
+    return opts.aul.stall_iter <= capped and not_halved(history, opts.aul.stall_iter)

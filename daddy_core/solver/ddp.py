@@ -73,16 +73,16 @@ def ddp(st: Stages, method: Method, opts: SolverOptions, stats: DDPStats,
         radius0: float = math.inf, retry: bool = False) -> DDPResult:
     """Alg. 3: backward sweep + forward pass until a stopping test ends the solve.
 
-    rho0: the Q_uu regularisation to start from (default opts.rho_init); radius0: the
+    rho0: the Q_uu regularisation to start from (default opts.ddp.rho_init); radius0: the
     trust-region radius to start from; retry: this solve retries one whose line search failed
     (``aul``'s trust-region fallback), which the stall test counts differently
     (``stopping.crawling``).
     """
-    ctl = StepControl(opts, method.dyn, opts.rho_init if rho0 is None else rho0, radius=radius0)
+    ctl = StepControl(opts, method.dyn, opts.ddp.rho_init if rho0 is None else rho0, radius=radius0)
     stop = Stopping(opts, retry, [(st.cost, 1.0)])
     cur = _Nominal(st)
-    status, iterations = Status.DDP_MAX_ITER, opts.ddp_max_iter
-    for it in range(1, opts.ddp_max_iter + 1):
+    status, iterations = Status.DDP_MAX_ITER, opts.ddp.max_iter
+    for it in range(1, opts.ddp.max_iter + 1):
         if deadline is not None and time.perf_counter() > deadline:
             status, iterations = Status.TIME_BUDGET, it - 1
             break

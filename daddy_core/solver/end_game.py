@@ -73,13 +73,13 @@ class Attempt:
 def meets_tol(end: End, ctx: SolveContext) -> bool:
     """A feasible end whose KKT residual is at most tol_optimality."""
     return (end.converged and end.optimality is not None
-            and end.optimality.kkt_residual <= ctx.opts.tol_optimality)
+            and end.optimality.kkt_residual <= ctx.opts.kkt.tol)
 
 
 def _polishable(end: End, ctx: SolveContext) -> bool:
     """A polished solve's feasible end whose evaluated KKT residual is above tol_optimality."""
     return (ctx.polish and end.converged and end.optimality is not None
-            and end.optimality.kkt_residual > ctx.opts.tol_optimality)
+            and end.optimality.kkt_residual > ctx.opts.kkt.tol)
 
 
 def homotopy(ctx: SolveContext, X, U, steps: tuple, **kw) -> HomotopyResult:
@@ -91,10 +91,10 @@ def homotopy(ctx: SolveContext, X, U, steps: tuple, **kw) -> HomotopyResult:
 
 def exact_wanted(ctx: SolveContext) -> bool:
     """A polished fuel-optimal solve of a problem with an exact fuel form whose options ask for
-    it (``SolverOptions.exact_fuel``) and for a KKT residual."""
+    it (``SolverOptions.end_game.exact_fuel``) and for a KKT residual."""
     opts = ctx.opts
-    return (opts.exact_fuel and ctx.polish and ctx.steps[-1][0] > 0
-            and math.isfinite(opts.tol_optimality) and has_throttle_form(ctx.problem))
+    return (opts.end_game.exact_fuel and ctx.polish and ctx.steps[-1][0] > 0
+            and math.isfinite(opts.kkt.tol) and has_throttle_form(ctx.problem))
 
 
 def opening(ctx: SolveContext, start: Start, duals: dict | None) -> Game:
@@ -133,7 +133,7 @@ def polished(ctx: SolveContext, hres: HomotopyResult, start: Start, polish: bool
     elif hres.stalled and end.converged:   # nothing else can meet the constraints
         end.converged, end.reason = False, hres.stalled
     with ctx.clock.phase("optimality"):
-        if end.converged and math.isfinite(ctx.opts.tol_optimality):   # (feasible only)
+        if end.converged and math.isfinite(ctx.opts.kkt.tol):   # (feasible only)
             end.optimality = optimality(ctx.problem, end.X, end.U, hres.stages.hom, end.maps)
     return end
 
@@ -143,7 +143,7 @@ def _newton_polish(ctx: SolveContext, end: End, hres: HomotopyResult) -> None:
     opts = ctx.opts
     with ctx.clock.phase("newton"):
         res = newton.polish(ctx.problem, end.X, end.U, opts, ctx.clock.deadline,
-                            maps=end.maps if opts.polish_from_ddp_maps else None)
+                            maps=end.maps if opts.newton.polish_from_ddp_maps else None)
     ctx.work.newton += res.iterations
     ctx.say(f"newton: {res.iterations} iterations, max violation {res.max_violation:.2e} "
             f"({res.reason})")
@@ -181,7 +181,8 @@ def _exact_fuel(ctx: SolveContext, end: End, stall_iter: int) -> End | None:
         opt = optimality(fuel, end.X, V, EXACT)
         if opt is None:
             return None
-        res = kkt_polish(fuel, end.X, V, EXACT, opts.with_(kkt_max_iter=opts.exact_fuel_max_iter),
+        res = kkt_polish(fuel, end.X, V, EXACT,
+                         opts.with_(kkt=dict(max_iter=opts.end_game.exact_fuel_max_iter)),
                          opt, ctx.clock.deadline, stall_iter)
         ctx.work.newton += res.newton_iterations
         ctx.work.kkt += res.iterations
@@ -199,7 +200,7 @@ def _exact_attempt(stall_option: str) -> Callable[[SolveContext, Game], Game]:
     """The exact fuel form polished from the game's end, stopped after the option
     ``stall_option``'s iterations without halving; the game ends when it meets tol."""
     def run(ctx: SolveContext, game: Game) -> Game:
-        tried = _exact_fuel(ctx, game.end, getattr(ctx.opts, stall_option))
+        tried = _exact_fuel(ctx, game.end, getattr(ctx.opts.end_game, stall_option))
         if tried is not None and meets_tol(tried, ctx):
             return replace(game, end=tried, final=True)
         return game
@@ -222,10 +223,10 @@ def _pseudo_huber_kkt(ctx: SolveContext, game: Game) -> Game:
 
 def _resolve(ctx: SolveContext, game: Game) -> Game:
     """The last homotopy step solved again (AUL + DDP, Newton, KKT polishing) from the polished
-    end with its KKT multipliers, at most ``kkt_resolves`` times while the polishing stalls;
+    end with its KKT multipliers, at most ``end_game.resolves`` times while the polishing stalls;
     a new end is kept when it improves on the old (``improves``). Rationale: DDP is the
     globalised method, and the KKT multipliers start it where its last solve stopped."""
-    for _ in range(ctx.opts.kkt_resolves):
+    for _ in range(ctx.opts.end_game.resolves):
         if not (_polishable(game.end, ctx) and not ctx.clock.out_of_time()):
             break
         game = _resolve_once(ctx, game)

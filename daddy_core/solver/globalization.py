@@ -27,22 +27,22 @@ class Blame:
 
 
 def _raise_rho(rho: float, opts: SolverOptions, growth: float | None = None) -> float:
-    """rho times ``growth`` (default opts.rho_factor), at least opts.rho_min."""
-    return max(rho * (opts.rho_factor if growth is None else growth), opts.rho_min)
+    """rho times ``growth`` (default opts.ddp.rho_factor), at least opts.ddp.rho_min."""
+    return max(rho * (opts.ddp.rho_factor if growth is None else growth), opts.ddp.rho_min)
 
 
 def _lower_rho(rho: float, opts: SolverOptions) -> float:
-    r = rho / opts.rho_factor
-    return r if r >= opts.rho_min else 0.0
+    r = rho / opts.ddp.rho_factor
+    return r if r >= opts.ddp.rho_min else 0.0
 
 
 def _rho_after_step(rho: float, alpha: float, opts: SolverOptions) -> float:
-    """Lower rho after an accepted step, unless it was shortened below opts.short_step: then
+    """Lower rho after an accepted step, unless it was shortened below opts.ddp.short_step: then
     the quadratic model promised far more than the step delivered (e.g. controls in the linear
     part of the pseudo-Huber cost, whose tiny curvature asks for huge steps), and rho is raised,
     Levenberg-Marquardt-like, rather than crawl on with tiny alphas."""
-    if alpha < opts.short_step:
-        return _raise_rho(rho, opts, opts.short_step_rho_growth)
+    if alpha < opts.ddp.short_step:
+        return _raise_rho(rho, opts, opts.ddp.short_step_rho_growth)
     return _lower_rho(rho, opts)
 
 
@@ -95,23 +95,23 @@ def line_search(st: Stages, gains: Gains, a0: float, dyn: bool, opts: SolverOpti
     """Backtracking from step a0 (one step length at a time): the first step whose actual /
     expected decrease lies in (ls_min_ratio, ls_max_ratio), or that decreases the cost where
     the expected decrease is round-off. Returns that trial (with its cost), or -- when the
-    first trial fails at a few stages (``blamed_stages``, with ``opts.stage_trust``) -- those
+    first trial fails at a few stages (``blamed_stages``, with ``opts.ddp.stage_trust``) -- those
     stages and their new bounds, or None.
 
     The caller bounds the blamed stages' steps (``clamp``, as ``forward_pass`` takes it, and
     the sweep's per-stage radius) and sweeps again (design notes: per-stage trust)."""
     p = st.problem
-    for i, a in enumerate(a0 * opts.ls_shrink ** np.arange(opts.ls_max_halvings + 1)):
+    for i, a in enumerate(a0 * opts.ddp.ls_shrink ** np.arange(opts.ddp.ls_max_halvings + 1)):
         trial = forward_pass(st, gains, a, dyn, clamp)
         if not trial.ok:
             continue
         stage_costs, terminal = augmented_cost_terms(p, trial.X, trial.U, st.mult, st.hom)
         Jn = trial.cost = float(np.sum(stage_costs) + terminal)
         expected = -(a * gains.dv1 + a * a * gains.dv2)
-        if _accepted(expected, J - Jn, J, Jn, opts.ls_min_ratio, opts.ls_max_ratio):
+        if _accepted(expected, J - Jn, J, Jn, opts.ddp.ls_min_ratio, opts.ddp.ls_max_ratio):
             return trial
-        if i == 0 and opts.stage_trust and math.isfinite(Jn):
-            bad = blamed_stages(st, trial, stage_costs, expected, J - Jn, opts.tol_ddp)
+        if i == 0 and opts.ddp.stage_trust and math.isfinite(Jn):
+            bad = blamed_stages(st, trial, stage_costs, expected, J - Jn, opts.ddp.tol)
             if bad.size:
                 return Blame(bad, 0.5 * np.linalg.norm(trial.dz[p.nx:, bad], axis=0))
     return None
@@ -121,7 +121,7 @@ def trust_region_step(st: Stages, gains: Gains, dyn: bool, opts: SolverOptions,
                        J: float, clamp: np.ndarray | None = None) -> Trial | Blame | None:
     """The full step of a trust-region sweep, accepted when its reduction ratio actual /
     expected lies within tr_ratio_tol of 1 (the quadratic model held). A rejected step whose
-    failure a few stages explain (``blamed_stages``, with ``opts.stage_trust``) bounds those
+    failure a few stages explain (``blamed_stages``, with ``opts.ddp.stage_trust``) bounds those
     stages (a ``Blame``, as the line search's first trial does), else None: the whole region
     shrinks. Rationale: a step crossing one stage's thrust bound shrank every stage's region
     (design notes: trust-region blame)."""
@@ -130,18 +130,18 @@ def trust_region_step(st: Stages, gains: Gains, dyn: bool, opts: SolverOptions,
         return None
     stage_costs, terminal = augmented_cost_terms(st.problem, trial.X, trial.U, st.mult, st.hom)
     Jn = trial.cost = float(np.sum(stage_costs) + terminal)
-    tol = opts.tr_ratio_tol
+    tol = opts.ddp.tr_ratio_tol
     expected, actual = -(gains.dv1 + gains.dv2), J - Jn
     if _accepted(expected, actual, J, Jn, 1 - tol, 1 + tol):
         return trial
     # a step predicted to gain less than tol_ddp: the ratio is round-off, any decrease will do
-    small = expected < opts.tol_ddp * abs(J)
+    small = expected < opts.ddp.tol * abs(J)
     if small and actual >= 0 and math.isfinite(Jn):
         return trial
-    if opts.stage_trust and math.isfinite(Jn):
+    if opts.ddp.stage_trust and math.isfinite(Jn):
         # the region, not the model, makes a trust-region step's expected decrease small: a
         # gap worth DDP's stopping test is a model failure, not round-off
-        bad = blamed_stages(st, trial, stage_costs, expected, actual, opts.tol_ddp,
+        bad = blamed_stages(st, trial, stage_costs, expected, actual, opts.ddp.tol,
                              worth=expected - actual)
         if bad.size:
             return Blame(bad, 0.5 * np.linalg.norm(trial.dz[st.problem.nx:, bad], axis=0))
@@ -157,7 +157,7 @@ def _max_step(gains: Gains) -> float:
 class StepControl:
     """The globalisation state of one DDP solve: the Q_uu regularisation rho, and either the
     line search's step length (carried between Dyn iterations, as in the reference code) or
-    the trust-region radius (``SolverOptions.globalization``)."""
+    the trust-region radius (``SolverOptions.ddp.globalization``)."""
 
     opts: SolverOptions
     dyn: bool
@@ -168,7 +168,7 @@ class StepControl:
 
     @property
     def trust_region(self) -> bool:
-        return self.opts.globalization is Globalization.TRUST_REGION
+        return self.opts.ddp.globalization is Globalization.TRUST_REGION
 
     @property
     def sweep_radius(self) -> float | np.ndarray:
@@ -192,22 +192,22 @@ class StepControl:
     def indefinite(self) -> Status | None:
         """After a sweep that found Q_uu + rho I indefinite: raise rho (None) or give up."""
         self.rho = _raise_rho(self.rho, self.opts)
-        return Status.QUU_INDEFINITE if self.rho > self.opts.rho_max else None
+        return Status.QUU_INDEFINITE if self.rho > self.opts.ddp.rho_max else None
 
     def rejected(self, st: Stages, gains: Gains) -> Status | None:
         """After a rejected step: shrink the trust region, or raise rho for the line search
         (None), or give up."""
         o = self.opts
         if self.trust_region:   # eq. 37 of the many-revolution DDP paper, shrinking
-            self.radius = (1.0 - o.tr_kappa) * min(self.radius, _max_step(gains))
+            self.radius = (1.0 - o.ddp.tr_kappa) * min(self.radius, _max_step(gains))
             floor = 1e-12 * (1.0 + float(np.max(np.abs(st.U))))
             return Status.TRUST_REGION_COLLAPSED if self.radius < floor else None
-        self.rho = _raise_rho(self.rho, o, o.short_step_rho_growth)
-        return Status.LINE_SEARCH_FAILED if self.rho > o.rho_max else None
+        self.rho = _raise_rho(self.rho, o, o.ddp.short_step_rho_growth)
+        return Status.LINE_SEARCH_FAILED if self.rho > o.ddp.rho_max else None
 
     def accepted(self, trial: Trial) -> None:
         if self.trust_region:   # eq. 37, growing (an unbounded region stays unbounded)
-            self.radius *= 1.0 + self.opts.tr_kappa
+            self.radius *= 1.0 + self.opts.ddp.tr_kappa
             self.rho = _lower_rho(self.rho, self.opts)
         else:
             self.rho = _rho_after_step(self.rho, trial.alpha, self.opts)
@@ -218,4 +218,4 @@ class StepControl:
             # region that held grows (eq. 37); the others keep theirs
             size = np.sqrt(np.sum(trial.dz[-trial.U.shape[1]:] ** 2, axis=0))
             binding = size >= 0.9 * self.stage_radius
-            self.stage_radius[binding] *= 1.0 + self.opts.tr_kappa
+            self.stage_radius[binding] *= 1.0 + self.opts.ddp.tr_kappa

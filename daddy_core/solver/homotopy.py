@@ -96,7 +96,7 @@ def continuation(problem: Problem, X, U, steps: tuple, method: Method, opts: Sol
     estimate at that solution), not those its last DDP solve ran with: an AUL that met tol_aul
     as mu grew ends with multipliers that lag by mu g, and with mu reset the next step's first
     DDP solve traded the constraints away on them (`docs/design-notes.md`)."""
-    mult = Multipliers.initial(problem, opts.mu_init)
+    mult = Multipliers.initial(problem, opts.aul.mu_init)
     mult.take_duals(duals)
     best, gains, history, aul_iterations = (X, U), None, [], 0
     converged, reason, stalled = True, "converged", ""
@@ -105,8 +105,8 @@ def continuation(problem: Problem, X, U, steps: tuple, method: Method, opts: Sol
         if progress:
             before, total = numbering or (0, len(steps))
             progress(f"homotopy {before + i + 1}/{total}: h = {hom[0]}, delta = {hom[1]}")
-        mult.mu[...] = opts.mu_init
-        mult.mu_t[...] = opts.mu_init
+        mult.mu[...] = opts.aul.mu_init
+        mult.mu_t[...] = opts.aul.mu_init
         st = (Stages(problem, X, U, mult, hom, opts.eps_da, F=F) if res is None
               else res.stages.with_costs(mult, hom))
         res = aul(st, method, opts, stats, deadline, progress, rho0=rho)

@@ -68,8 +68,8 @@ class KKTResult(StepResult):
 def kkt_polish(problem: Problem, X, U, hom, opts: SolverOptions, optimality0: Optimality,
                deadline: float | None = None, stall_iter: int = 0) -> KKTResult:
     """From a feasible (X, U) whose first-order optimality is ``optimality0``, Newton on the
-    KKT conditions (module docstring) until the KKT residual is at most opts.tol_optimality,
-    for at most opts.kkt_max_iter iterations, or (``stall_iter`` > 0) until the lowest residual
+    KKT conditions (module docstring) until the KKT residual is at most opts.kkt.tol,
+    for at most opts.kkt.max_iter iterations, or (``stall_iter`` > 0) until the lowest residual
     so far has not halved over ``stall_iter`` iterations (``Status.KKT_STALLED``: the residual
     is not monotone -- a step that changes the working set can raise it). Every iterate's
     stage maps are expanded afresh:
@@ -85,8 +85,8 @@ def kkt_polish(problem: Problem, X, U, hom, opts: SolverOptions, optimality0: Op
         model = every_constraint(problem, X, U)
     except (DaddyError, ArithmeticError, ValueError):
         return KKTResult(False, 0, Status.KKT_NO_DESCENT, X, U, opt, None, 0)
-    while it < opts.kkt_max_iter:
-        if opt.kkt_residual <= opts.tol_optimality:
+    while it < opts.kkt.max_iter:
+        if opt.kkt_residual <= opts.kkt.tol:
             status = Status.KKT_CONVERGED
             break
         if deadline is not None and time.perf_counter() > deadline:
@@ -112,7 +112,7 @@ def kkt_polish(problem: Problem, X, U, hom, opts: SolverOptions, optimality0: Op
         newton_its += n_its
         opt = new
         lowest.append(min(lowest[-1], opt.kkt_residual))
-    return KKTResult(opt.kkt_residual <= opts.tol_optimality, it, status, X, U, opt,
+    return KKTResult(opt.kkt_residual <= opts.kkt.tol, it, status, X, U, opt,
                      StageMaps.of(model.F, X, U, opts.eps_da), newton_its)
 
 
@@ -125,10 +125,10 @@ def _iteration(problem: Problem, X, U, hom, f: float, model: ConstraintModel,
     Hf, H = _hessians(problem, X, U, hom, model, mu)
     g = model.residual()
     ineq = model.inequality_rows()
-    work = ~ineq | (g > -opts.newton_active_tol)
+    work = ~ineq | (g > -opts.newton.active_tol)
     scale = max(float(np.max(np.abs(H.diagonal()), initial=0.0)), 1e-12)
     maps = StageMaps.of(model.F, X, U, opts.eps_da)
-    restore_opts = opts.with_(newton_max_iter=opts.kkt_restore_iter)
+    restore_opts = opts.with_(newton=dict(max_iter=opts.kkt.restore_iter))
     newton_its = 0
     for lv in range(level, len(_SHIFTS)):
         shift = _SHIFTS[lv] * scale
@@ -140,8 +140,8 @@ def _iteration(problem: Problem, X, U, hom, f: float, model: ConstraintModel,
             continue   # no descent on the model (negative curvature along the step): shift more
         Xt, Ut = model.apply(dY)
         cost_model = c @ dY + 0.5 * (dY @ (Hf @ dY))
-        res = _trial(problem, model, Xt, Ut, hom, f + cost_model, opts.kkt_cost_slack * predicted,
-                     opts.kkt_trial_violation * float(np.max(np.abs(dY))), restore_opts,
+        res = _trial(problem, model, Xt, Ut, hom, f + cost_model, opts.kkt.cost_slack * predicted,
+                     opts.kkt.trial_violation * float(np.max(np.abs(dY))), restore_opts,
                      deadline, maps)
         if res is None:
             continue
@@ -189,24 +189,24 @@ def _restore(problem: Problem, model: ConstraintModel, X, U, opts: SolverOptions
     left is second order: chord iterations -- minimum-norm corrections on the step's own
     Jacobian (``model``'s D, factorised once) with exact float residuals -- usually take it
     below tol_newton at the cost of one float integration each. When they do not, Newton
-    (Alg. 11) with at most ``opts.newton_max_iter`` iterations: a step whose restoration needs
+    (Alg. 11) with at most ``opts.newton.max_iter`` iterations: a step whose restoration needs
     more left the region where the linearisation holds, and a larger shift is cheaper. None
     (refused) when (X, U) violates the constraints by more than ``refuse_above``."""
     ineq = model.inequality_rows()
     rows, sigma, last = None, None, np.inf
     Xc, Uc = X, U
-    for it in range(opts.kkt_chord_iter):
+    for it in range(opts.kkt.chord_iter):
         values, violation = _exact_values(problem, Xc, Uc)
         if it == 0 and not violation <= refuse_above:   # (or NaN)
             return None
         if not violation < 0.5 * last:   # (or NaN) chords that do not converge fast stop
             break
-        if violation <= opts.tol_newton:
+        if violation <= opts.newton.tol:
             return NewtonResult(True, it, Status.NEWTON_CONVERGED, Xc, Uc, violation, True, None)
         if rows is None:   # the equalities and the inequalities at or past their bound
-            rows = ~ineq | (values > -opts.newton_active_tol)
-            sigma = BandedSigma(model.D[rows], opts.newton_regularisation, column_weights(
-                problem, U, opts.newton_control_weight_floor))   # Newton's weighted steps
+            rows = ~ineq | (values > -opts.newton.active_tol)
+            sigma = BandedSigma(model.D[rows], opts.newton.regularisation, column_weights(
+                problem, U, opts.newton.control_weight_floor))   # Newton's weighted steps
         Xc, Uc = model.apply(sigma.step(values[rows]), Xc, Uc)
         last = violation
     return polish(problem, X, U, opts, deadline, maps=maps)   # from the step, not the chords'

@@ -4,7 +4,7 @@ The active constraints Gamma(Y) -- active path inequalities, path equalities, co
 h_k = x_{k+1} - f(x_k, u_k) and terminal constraints -- are driven to zero by minimum-norm
 Newton steps dY = -Delta^T (Delta Delta^T)^{-1} d over Y = [u_0, x_1, u_1, ..., u_{N-1}, x_N].
 
-Weighted steps (``SolverOptions.newton_control_weight_floor`` > 0, problems with a thrust bound
+Weighted steps (``SolverOptions.newton.control_weight_floor`` > 0, problems with a thrust bound
 u_max): the minimum of dY^T W^{-1} dY instead, dY = -W Delta^T (Delta W Delta^T)^{-1} d, with
 W = 1 on the states and w_k = max(|u_k| / u_max, floor)^2 on the controls of stage k. The plain
 step moves a coasting stage's control (|u| ~ 1e-3 u_max in a fuel-optimal plan) as much as a
@@ -281,8 +281,8 @@ def _flat(current: list) -> bool:
 
 def polish(problem: Problem, X, U, opts: SolverOptions, deadline: float | None = None,
            maps: StageMaps | None = None) -> NewtonResult:
-    """Alg. 11 from (X, U) to max active-constraint violation <= opts.tol_newton: the polishing
-    of a DDP solution, and the restoration of a guess (``SolverOptions.restore_start``).
+    """Alg. 11 from (X, U) to max active-constraint violation <= opts.newton.tol: the polishing
+    of a DDP solution, and the restoration of a guess (``SolverOptions.start.restore``).
 
     The constraint values Gamma(Y) are always exact (one batched float integration of every
     stage per outer iteration). The stage maps that give their derivatives are re-centred from
@@ -295,11 +295,11 @@ def polish(problem: Problem, X, U, opts: SolverOptions, deadline: float | None =
     """
     run = _Run(X.copy(), U.copy(), maps)
     status = Status.NEWTON_MAX_ITER
-    while run.it < opts.newton_max_iter:
+    while run.it < opts.newton.max_iter:
         if deadline is not None and time.perf_counter() > deadline:
             status = Status.TIME_BUDGET
             break
-        fx, dmax, infeasibility = _residual(problem, run.X, run.U, opts.newton_active_tol)
+        fx, dmax, infeasibility = _residual(problem, run.X, run.U, opts.newton.active_tol)
         if not np.isfinite(dmax):
             # the step left the dynamics' domain (e.g. an orbit's eccentricity past 1 in
             # equinoctial elements, where the model's polynomials are still finite): halve it
@@ -323,7 +323,7 @@ def polish(problem: Problem, X, U, opts: SolverOptions, deadline: float | None =
     if run.best is None:
         return NewtonResult(False, run.it, status, X, U, np.inf, False, run.maps, run.start_F)
     _, Xb, Ub, viol = run.best
-    return NewtonResult(viol <= opts.tol_newton, run.it, status, Xb, Ub, viol, True, run.maps,
+    return NewtonResult(viol <= opts.newton.tol, run.it, status, Xb, Ub, viol, True, run.maps,
                         run.start_F)
 
 
@@ -366,10 +366,10 @@ def _stalled(run: _Run, dmax: float, opts: SolverOptions) -> Status | None:
     """Converged, or stalled: Newton converges fast or not at all, so a best residual that did
     not halve over newton_stall_iter iterations, or an exact residual that stays put
     (``_flat``), ends the run."""
-    if dmax <= opts.tol_newton:
+    if dmax <= opts.newton.tol:
         return Status.NEWTON_CONVERGED
-    if not_halved(run.history, opts.newton_stall_iter) or (
-            opts.newton_stall_iter > 0 and _flat(run.current)):
+    if not_halved(run.history, opts.newton.stall_iter) or (
+            opts.newton.stall_iter > 0 and _flat(run.current)):
         return Status.NEWTON_STALLED
     return None
 
@@ -383,12 +383,12 @@ def _outer_step(problem: Problem, run: _Run, fx, dmax: float,
     run.prev_dmax = dmax
     run.fresh = run.maps is None
     X, U = run.X, run.U
-    model = ConstraintModel(problem, X, U, opts.newton_active_tol,
-                            F=exact_valued_maps(problem, run.maps, X, U, fx, opts.map_reach))
+    model = ConstraintModel(problem, X, U, opts.newton.active_tol,
+                            F=exact_valued_maps(problem, run.maps, X, U, fx, opts.newton.map_reach))
     if run.it == 0 and run.fresh:
         run.start_F = model.F
-    sigma = _factorise(model, column_weights(problem, U, opts.newton_control_weight_floor),
-                       opts.newton_regularisation)
+    sigma = _factorise(model, column_weights(problem, U, opts.newton.control_weight_floor),
+                       opts.newton.regularisation)
     if sigma is None:
         return Status.NEWTON_SINGULAR
     dY, inner, model_max = _inner_iterations(model, sigma, dmax, opts)
@@ -398,7 +398,7 @@ def _outer_step(problem: Problem, run: _Run, fx, dmax: float,
             run.maps, run.prev_dmax, run.fresh = None, np.inf, True
             return None
         return Status.NEWTON_NO_DESCENT
-    if (opts.newton_stall_iter > 0 and run.fresh and dmax > run.best[0]
+    if (opts.newton.stall_iter > 0 and run.fresh and dmax > run.best[0]
             and model_max > (1.0 - _FLAT_TOL) * dmax):
         # thrown above its best residual, a fresh model that Newton cannot take down by 1 %
         # has no way back (design notes: no descent on a fresh model)
@@ -431,8 +431,8 @@ def _inner_iterations(model: ConstraintModel, sigma: BandedSigma, dmax: float,
     dY = np.zeros(model.D.shape[1])
     r = np.inf
     inner = 0
-    while (dmax > opts.tol_newton and r > opts.newton_cv_ratio
-           and inner < opts.newton_inner_max_iter):
+    while (dmax > opts.newton.tol and r > opts.newton.cv_ratio
+           and inner < opts.newton.inner_max_iter):
         step, ahead = _corrected(model, sigma, dY, sigma.step(d), dmax)
         found = _backtrack(model, dY, step, d, dmax, opts, ahead)
         if found is None:
@@ -488,7 +488,7 @@ def _backtrack(model: ConstraintModel, dY: np.ndarray, step: np.ndarray, d: np.n
         ahead = model.residual(dY + step)
     if below(ahead):
         return 1.0, ahead
-    alphas = opts.newton_ls_shrink ** np.arange(1, opts.newton_ls_max_halvings)
+    alphas = opts.newton.ls_shrink ** np.arange(1, opts.newton.ls_max_halvings)
     back = model.residual(dY - step)
     with np.errstate(invalid="ignore", over="ignore"):   # (a non-finite quadratic: below)
         r1, r2 = 0.5 * (ahead - back), 0.5 * (ahead + back) - d

@@ -1,7 +1,9 @@
-"""Solver options: small typed objects instead of a 40-field parameter bag, and the method
-enum of paper Table 1."""
+"""Solver options grouped by the algorithm that reads them (``SolverOptions``: DDP, AUL, Newton,
+start, KKT, end game, homotopy, run; defaults: the reference code's values), the node's warm
+re-plan preset (``SolverOptions.warm_replan``), and the method enum of paper Table 1."""
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass, fields, replace
 from enum import Enum
 
@@ -58,265 +60,321 @@ class Globalization(Enum):
     TRUST_REGION = "trust_region"
 
 
+def _check(group: object, prefix: str) -> None:
+    """Every number of an options group non-negative and not NaN (DaddyError naming it)."""
+    for f in fields(group):
+        v = getattr(group, f.name)
+        if f.type in ("bool", "Globalization") or isinstance(v, bool):
+            continue
+        if not isinstance(v, (int, float)) or v != v or v < 0:
+            raise DaddyError(f"options.{prefix}.{f.name} must be a non-negative number, got {v!r}")
+
+
+def _positive(group: object, prefix: str, *names: str) -> None:
+    for name in names:
+        if not getattr(group, name) > 0:
+            raise DaddyError(f"options.{prefix}.{name} must be > 0")
+
+
+def _fraction(group: object, prefix: str, *names: str) -> None:
+    for name in names:
+        if not 0 < getattr(group, name) < 1:
+            raise DaddyError(f"options.{prefix}.{name} must be in (0, 1), got "
+                             f"{getattr(group, name)!r}")
+
+
+class _Group:
+    """Shared by the option groups: ``with_`` (a copy with some fields replaced)."""
+
+    def with_(self, **kw):
+        return replace(self, **kw)
+
+
 @dataclass(frozen=True)
-class SolverOptions:
-    """Tolerances and algorithm parameters (defaults: the reference code's values), grouped by
-    the part of the solver that reads them.
+class DDPOptions(_Group):
+    """DDP (Alg. 3): stopping, Q_uu regularisation, globalisation."""
 
-    DDP (Alg. 3):
-        tol_ddp: relative cost decrease that stops a DDP solve (after >= ddp_min_iter).
-        ddp_min_iter: iterations before the tol_ddp test applies (the reference: 3; a warm
-            start from a converged solution can stop after 1).
-        ddp_max_iter: iteration bound of one DDP solve.
-        ddp_stall_iter, ddp_stall_alpha: DDP has stalled (``Status.DDP_STALLED``) when
-            ddp_stall_iter steps in a row were each shorter than ddp_stall_alpha of the full step
-            (the line search's alpha; in the trust-region retry of a failed line search, the
-            region's radius / step, a rejected step counting as zero) and lowered the cost by
-            less than tol_ddp (relative): the model holds along a vanishing fraction of each
-            step, and the iteration bound would be spent crawling (``stopping.crawling``: the
-            measurement). 0 turns the test off.
-        rho_init, rho_min, rho_max, rho_factor: Quu regularisation schedule.
-        ls_min_ratio, ls_max_ratio, ls_shrink, ls_max_halvings: backtracking line search; a step
-            is accepted when actual / expected decrease is in (min, max).
-        short_step, short_step_rho_growth: when an accepted step was shortened below
-            ``short_step``, multiply rho by ``short_step_rho_growth`` (Levenberg-Marquardt-like
-            damping of a model that promises too much, e.g. controls in the linear part of the
-            pseudo-Huber cost). 0 (default): accepted steps never raise rho, as in the
-            reference. A line search that fails altogether always raises rho by
-            ``short_step_rho_growth`` (the reference: by rho_factor, which let DDP stall for
-            hundreds of forward passes while rho crept up).
-        globalization: ``Globalization`` (or its value): "line_search" or "trust_region".
-        stage_trust: a trust region per stage: when the line search's first trial (or a
-            trust-region step) fails because the stage cost's own model failed at a few stages
-            (``globalization.blamed_stages``), those stages' control changes are bounded to half of
-            what failed (the sweep's per-stage radius and the forward pass's clamp) and the
-            sweep runs again, instead of one shorter step length (or a smaller region) for
-            every stage; an accepted step that a bound held back grows that bound by
-            (1 + tr_kappa).
-        tr_fallback: with the line search, a DDP solve that runs into ddp_max_iter (or stalls)
-            is solved again from its start with the trust region, which the rest of that
-            homotopy step keeps (``aul_safeguards.fallback_options``).
-        tr_ratio_tol, tr_kappa: the trust region accepts a step when |actual / expected - 1|
-            <= tr_ratio_tol and then grows its radius by (1 + tr_kappa), else shrinks it by
-            (1 - tr_kappa) and sweeps again on the same expansions (PDDP's Table 2: 0.1, 0.25;
-            the many-revolution DDP paper's eq. 37). The first step is unbounded (the papers
-            start from the control bound, which a general problem does not name): the first
-            rejection sets the radius to (1 - tr_kappa) times that step's largest stage step.
-        carry_rho: each DDP solve of an AUL loop resumes from the previous one's rho instead
-            of rho_init (each homotopy step restarts from rho_init or the warm start's rho:
-            carried across homotopy steps it led the halo case to a worse local optimum).
-    Augmented Lagrangian (Alg. 4, eq. 8-9):
-        tol_aul: maximum constraint violation that stops the augmented Lagrangian.
-        aul_max_iter: outer iteration bound.
-        lambda_max, mu_init, mu_max, mu_growth: multiplier bound and penalty schedule.
-        aul_stall_iter: stop (``Status.AUL_STALLED``) when the penalty has been at mu_max for
-            this many outer iterations and the max violation fell by less than half over them
-            (0: never): a failing solve then says so in seconds instead of spending its
-            aul_max_iter iterations or its time budget.
-    Newton (Alg. 5 / 11):
-        tol_newton: maximum constraint violation targeted by Newton polishing.
-        newton_max_iter: outer iterations (one expansion each); newton_inner_max_iter: inner
-            iterations on one polynomial model; newton_ls_shrink, newton_ls_max_halvings: the
-            backtracking of an inner step (it must reduce the model's max residual).
-        newton_stall_iter: stop (``Status.NEWTON_STALLED``) when the best residual did not
-            halve over this many outer iterations, or the residual stopped moving
-            (``newton._flat``), and (``Status.NEWTON_NO_DESCENT``) when a fresh model above the
-            best residual cannot be taken down by 1 % (0: none of these): each outer iteration
-            converges its model at a Newton rate, so a run this slow is one that will not
-            converge.
-        newton_cv_ratio: the convergence-rate threshold (eps_CV, paper Alg. 5).
-        newton_active_tol: an inequality with g > -tol is treated as active.
-        newton_regularisation: diagonal added to Delta Delta^T if it is not positive definite.
-        newton_control_weight_floor: the steps weigh each stage's control by
-            max(|u_k| / u_max, floor)^2 (problems with a thrust bound), so that coasting stages
-            keep coasting and the thrust arcs take the correction (see ``newton``); 0: the
-            paper's plain minimum-norm steps.
-        polish_from_ddp_maps: start the polishing from the DDP's last stage maps (re-centred
-            where the step stays inside their radius) instead of expanding every stage. Off by
-            default: maps re-centred again and again carry derivative errors, and closed-loop
-            arrival plans polished this way missed their target by more.
-    Start:
-        restore_start: before DDP, drive the initial guess -- cold or warm -- to feasibility
-            with Newton (``newton.polish``); when Newton does not get there from a cold
-            guess that thrusts, it restores the ballistic trajectory (zero control) instead;
-            when that stalls too (e.g. Earth-Mars: the ballistic flight is far from Mars), DDP
-            starts from the guess itself. If DDP does not converge (e.g. the time budget), the
-            solve returns the restored feasible iterate (converged=False, with the reason).
-            Why it is the default, for cold starts too: the augmented Lagrangian starts with a
-            penalty of mu_init, under which DDP's first solve from a random guess trades the
-            thrust bound for the terminal miss: on DRO->DRO its iterates took the thrust to
-            3 u_max and the trajectory to a lunar flyby at 4,400 km, where the line search
-            crawled at steps of 1e-4 until the time budget ran out; from the restored guess
-            the energy step starts feasible and stays near it (robustness harness, random
-            guesses: DRO->DRO 91 -> 96 of 100, halo 18 -> 21 of 30, Earth-Mars 100 of 100
-            either way; with the ballistic fallback DRO 100 of 100, halo 28 of 30). From the
-            paper's near-zero guess the restoration converges on the halo and DRO transfers
-            (same optima) and stalls on Earth-Mars, Lyapunov and NRHO->DRO (the guess is used
-            as before).
-        map_reach: Newton and the restoration's rollout re-centre stage maps up to this many
-            times their convergence radius (eps_da): Newton's residuals are exact, so
-            derivatives a little less accurate only slow its convergence, and an outer
-            iteration that does not reduce the residual expands afresh.
-    Path constraints (``Problem.g_path``; ``path_constraints``, ``path_exchange``):
-        path_exchange_rounds: after the solve, at most this many rounds of the exchange step:
-            the dense DOP853 check finds where g_path rises above zero between a stage's
-            samples, those samples are tightened (``path_constraints.tightened``) and the last
-            homotopy step is solved again from the solution (0: the samples alone; the
-            dense margin is still reported, and a violation between them fails the solve).
-    Homotopy (eq. 12-14):
-        homotopy: sequence of (h, delta) pairs (h = Huber weight, delta = Huber width).
-    Optimality (``optimality``: the relative KKT residual reported as
-    ``Solution.kkt_residual``):
-        tol_optimality: a polished solve converges when its final iterate meets the
-            constraints and its KKT residual is at most this (``polish=False``: the residual is
-            reported, the DDP's own test decides; inf: neither evaluated nor checked, as the
-            guidance node's warm re-plans run, and ``Solution.kkt_residual`` is None). Above it
-            after the Newton polishing, the KKT polishing (``kkt_polish``: Newton on the KKT
-            conditions, each step restored to feasibility) runs for at most ``kkt_max_iter``
-            iterations: DDP's relative-decrease test stops early on ill-conditioned problems,
-            where a step along a stiff direction gains little however large the gradient.
-        kkt_cost_slack: a KKT step whose cost at Y + dY misses the cost's own quadratic model
-            by more than this many predicted decreases is refused before its restoration (it
-            left the region where the cost is quadratic) and the Hessian shift raised.
-        kkt_trial_violation: a KKT step whose point violates the constraints by more than
-            this many times its own size (max |dY|) is refused before its restoration (the
-            linearisation's remainder is second order in the step: the step left the region
-            where the model holds) and the Hessian shift raised.
-        kkt_chord_iter, kkt_restore_iter: a KKT step's restoration to feasibility: chord
-            iterations on the step's own Jacobian first (each one float integration), then
-            Newton with at most kkt_restore_iter iterations (a step needing more left the
-            region where the linearisation holds: a larger shift is cheaper).
-        kkt_resolves: when the KKT polishing ends above tol_optimality, the last homotopy step
-            is solved again (AUL + DDP, then both polishings) from the polished iterate with
-            its KKT multipliers, at most this many times, and kept when it ends with a smaller
-            KKT residual (``solve``: why).
-        exact_fuel: a fuel-optimal solve of a problem that has an exact fuel form (``throttle``:
-            the thrust as throttle and direction, the propellant linear in the throttle) ends
-            with the KKT polishing of that form, for at most ``exact_fuel_max_iter`` iterations,
-            instead of polishing the pseudo-Huber cost of the last homotopy step: the solution
-            is the true fuel optimum (``throttle``: why). It is tried from the energy-optimal
-            (first) step's solution, stopped when its lowest KKT residual has not halved over
-            ``exact_fuel_stall_iter`` iterations (GTO->GEO's halves only over tens of them, on
-            its way to converging in 95), then from the end of the rest of the homotopy,
-            stopped after ``exact_fuel_end_stall_iter`` (near the optimum there, it converges
-            in 15 or creeps); if neither converges, the last step's pseudo-Huber end game runs
-            (``solve._exact_end``: why).
-    Run:
-        time_budget_s: wall-clock budget for the whole solve (None: unbounded).
-        verbose: print progress lines (homotopy step, AUL iteration, violation, cost).
-    """
-
-    tol_ddp: float = 1e-4
-    tol_aul: float = 1e-6
-    tol_newton: float = 1e-10
-    rho_init: float = 0.0
-    rho_min: float = 1e-8
-    rho_max: float = 1e8
-    rho_factor: float = 1.6
-    ls_min_ratio: float = 1e-8
-    ls_max_ratio: float = 10.0
-    ls_shrink: float = 0.5
-    ls_max_halvings: int = 20
-    short_step: float = 0.0
-    short_step_rho_growth: float = 10.0
-    carry_rho: bool = False
-    globalization: Globalization = Globalization.LINE_SEARCH
-    stage_trust: bool = True
-    tr_ratio_tol: float = 0.1
-    tr_fallback: bool = True
-    tr_kappa: float = 0.25
-    restore_start: bool = True
-    polish_from_ddp_maps: bool = False
-    ddp_max_iter: int = 200
-    ddp_min_iter: int = 3
-    ddp_stall_iter: int = 20
-    ddp_stall_alpha: float = 1e-3
-    aul_max_iter: int = 40
-    newton_max_iter: int = 60
-    lambda_max: float = 1e8
-    mu_init: float = 1.0
-    mu_max: float = 1e8
-    mu_growth: float = 10.0
-    aul_stall_iter: int = 3
-    newton_cv_ratio: float = 1.1
-    newton_stall_iter: int = 10
-    newton_active_tol: float = 1e-6
-    newton_regularisation: float = 1e-12
-    newton_control_weight_floor: float = 1e-2
-    newton_inner_max_iter: int = 20
-    newton_ls_shrink: float = 0.5
-    newton_ls_max_halvings: int = 25
-    map_reach: float = 10.0
-    homotopy: tuple = ((0.0, 1e-2),)
-    tol_optimality: float = 1e-4
-    kkt_max_iter: int = 30
-    kkt_cost_slack: float = 5.0
-    kkt_trial_violation: float = 100.0
-    kkt_chord_iter: int = 6
-    kkt_restore_iter: int = 4
-    kkt_resolves: int = 1
-    exact_fuel: bool = True
-    exact_fuel_max_iter: int = 100
-    exact_fuel_stall_iter: int = 50
-    exact_fuel_end_stall_iter: int = 10
-    path_exchange_rounds: int = 4
-    time_budget_s: float | None = None
-    verbose: bool = False
+    tol: float = 1e-4                 # relative cost decrease that stops a solve (>= min_iter)
+    min_iter: int = 3                 # iterations before the tol test applies
+    max_iter: int = 200               # iteration bound of one solve
+    stall_iter: int = 20              # steps in a row below stall_alpha without progress: stalled (0: off)
+    stall_alpha: float = 1e-3         # the step fraction below which a step counts as cut short
+    rho_init: float = 0.0             # Q_uu regularisation at the start of a solve
+    rho_min: float = 1e-8             # smallest non-zero rho
+    rho_max: float = 1e8              # rho above which a solve gives up
+    rho_factor: float = 1.6           # rho's growth / shrink factor
+    ls_min_ratio: float = 1e-8        # line search: accepted when actual / expected decrease >
+    ls_max_ratio: float = 10.0        #   ls_min_ratio and < ls_max_ratio
+    ls_shrink: float = 0.5            # step-length factor of a backtrack
+    ls_max_halvings: int = 20         # backtracks before the line search fails
+    short_step: float = 0.0           # an accepted step shorter than this raises rho (0: never)
+    short_step_rho_growth: float = 10.0   # rho's factor after a short step or a failed line search
+    globalization: Globalization = Globalization.LINE_SEARCH   # line search or trust region
+    stage_trust: bool = True          # bound the few stages a failed step is blamed on
+    tr_ratio_tol: float = 0.1         # trust region: accepted when |actual / expected - 1| <= this
+    tr_kappa: float = 0.25            # trust region: radius grows by 1 + kappa, shrinks by 1 - kappa
+    carry_rho: bool = False           # each solve of an AUL loop resumes from the last one's rho
 
     def __post_init__(self):
-        for f in fields(self):
-            v = getattr(self, f.name)
-            if f.name in ("homotopy", "time_budget_s", "globalization") or f.type == "bool":
-                continue
-            if not isinstance(v, (int, float)) or v != v or v < 0:
-                raise DaddyError(f"options.{f.name} must be a non-negative number, got {v!r}")
-        for name in ("tol_ddp", "tol_aul", "tol_newton", "tol_optimality", "rho_max",
-                     "rho_factor", "mu_growth"):
-            if getattr(self, name) <= 0:
-                raise DaddyError(f"options.{name} must be > 0")
+        _check(self, "ddp")
+        _positive(self, "ddp", "tol", "rho_max", "rho_factor")
+        _fraction(self, "ddp", "ls_shrink", "tr_kappa")
         try:
             object.__setattr__(self, "globalization", Globalization(self.globalization))
         except ValueError:
-            raise DaddyError("options.globalization must be one of "
+            raise DaddyError("options.ddp.globalization must be one of "
                              f"{[g.value for g in Globalization]}, got {self.globalization!r}") \
                 from None
-        for name in ("ls_shrink", "newton_ls_shrink", "tr_kappa"):
-            if not 0 < getattr(self, name) < 1:
-                raise DaddyError(f"options.{name} must be in (0, 1), got {getattr(self, name)!r}")
-        if self.newton_control_weight_floor > 1:
-            raise DaddyError("options.newton_control_weight_floor must be in [0, 1], got "
-                             f"{self.newton_control_weight_floor!r}")
-        try:
-            hom = tuple(tuple(map(float, p)) for p in self.homotopy)
-        except (TypeError, ValueError) as exc:
-            raise DaddyError("options.homotopy must be a sequence of (h, delta) number pairs") \
-                from exc
-        if not hom or any(len(p) != 2 or not (0 <= p[0] <= 1) or not p[1] > 0 for p in hom):
-            raise DaddyError("options.homotopy must be a non-empty sequence of (h in [0, 1], delta > 0)")
-        object.__setattr__(self, "homotopy", hom)
+
+
+@dataclass(frozen=True)
+class AULOptions(_Group):
+    """The augmented Lagrangian (Alg. 4, eq. 8-9) and its safeguards."""
+
+    tol: float = 1e-6                 # max constraint violation that ends the loop
+    max_iter: int = 40                # outer iteration bound
+    lambda_max: float = 1e8           # multiplier bound
+    mu_init: float = 1.0              # penalty at the start of each homotopy step
+    mu_max: float = 1e8               # penalty cap
+    mu_growth: float = 10.0           # penalty growth per outer iteration
+    stall_iter: int = 3               # solves at mu_max without halving the violation: stalled (0: off)
+    tr_fallback: bool = True          # a line-search solve cut off is retried with the trust region
+
+    def __post_init__(self):
+        _check(self, "aul")
+        _positive(self, "aul", "tol", "mu_growth")
+
+
+@dataclass(frozen=True)
+class NewtonOptions(_Group):
+    """Newton's restoration and polishing of the constraints (Alg. 5 / 11)."""
+
+    tol: float = 1e-10                # max constraint violation targeted
+    max_iter: int = 60                # outer iterations (one constraint model each)
+    inner_max_iter: int = 20          # inner iterations on one polynomial model
+    ls_shrink: float = 0.5            # backtracking factor of an inner step
+    ls_max_halvings: int = 25         # backtracks of an inner step
+    stall_iter: int = 10              # outer iterations without halving the residual: stalled (0: off)
+    cv_ratio: float = 1.1             # convergence-rate threshold (eps_CV, Alg. 5)
+    active_tol: float = 1e-6          # an inequality with g > -active_tol is active
+    regularisation: float = 1e-12     # diagonal added to Delta Delta^T if not positive definite
+    control_weight_floor: float = 1e-2    # steps weigh controls by max(|u|/u_max, floor)^2 (0: plain)
+    map_reach: float = 10.0           # stage maps are re-centred up to this many radii
+    polish_from_ddp_maps: bool = False    # polish from DDP's last maps instead of fresh expansions
+
+    def __post_init__(self):
+        _check(self, "newton")
+        _positive(self, "newton", "tol")
+        _fraction(self, "newton", "ls_shrink")
+        if self.control_weight_floor > 1:
+            raise DaddyError("options.newton.control_weight_floor must be in [0, 1], got "
+                             f"{self.control_weight_floor!r}")
+
+
+@dataclass(frozen=True)
+class StartOptions(_Group):
+    """Where DDP starts (``start``)."""
+
+    restore: bool = True              # drive any guess to feasibility with Newton before DDP
+
+    def __post_init__(self):
+        _check(self, "start")
+
+
+@dataclass(frozen=True)
+class KKTOptions(_Group):
+    """First-order optimality (``optimality``) and the KKT polishing (``kkt_polish``)."""
+
+    tol: float = 1e-4                 # KKT residual a polished solve must reach (inf: not evaluated)
+    max_iter: int = 30                # KKT polishing iterations
+    cost_slack: float = 5.0           # a step missing its cost model by this many predictions is refused
+    trial_violation: float = 100.0    # a step violating by this many times its size is refused
+    chord_iter: int = 6               # chord iterations of a step's restoration
+    restore_iter: int = 4             # Newton iterations of a step's restoration
+
+    def __post_init__(self):
+        _check(self, "kkt")
+        _positive(self, "kkt", "tol")
+
+
+@dataclass(frozen=True)
+class EndGameOptions(_Group):
+    """The end game's attempts (``end_game``) and the path constraints' exchange."""
+
+    exact_fuel: bool = True           # a fuel solve ends in the exact (throttle) fuel form
+    exact_fuel_max_iter: int = 100    # KKT iterations of an exact fuel attempt
+    exact_fuel_stall_iter: int = 50   # the attempt from the energy step stops unhalved after these
+    exact_fuel_end_stall_iter: int = 10   # the attempt from the homotopy's end likewise
+    resolves: int = 1                 # re-solves of the last step after a stalled KKT polishing
+    path_exchange_rounds: int = 4     # exchange rounds of g_path between the nodes (0: none)
+
+    def __post_init__(self):
+        _check(self, "end_game")
+
+
+@dataclass(frozen=True)
+class RunOptions(_Group):
+    """The whole solve."""
+
+    time_budget_s: float | None = None    # wall-clock budget [s] (None: unbounded)
+    verbose: bool = False             # print progress lines
+
+    def __post_init__(self):
         tb = self.time_budget_s
         if tb is not None and (isinstance(tb, bool) or not isinstance(tb, (int, float))
                                or not tb > 0):
-            raise DaddyError(f"options.time_budget_s must be > 0, got {self.time_budget_s!r}")
+            raise DaddyError(f"options.run.time_budget_s must be > 0, got {tb!r}")
+
+
+GROUPS = {"ddp": DDPOptions, "aul": AULOptions, "newton": NewtonOptions, "start": StartOptions,
+          "kkt": KKTOptions, "end_game": EndGameOptions, "run": RunOptions}
+
+# the options' flat names before they were grouped -> (group, field): for the errors that name
+# a field's new place, and for the flat per-case settings of case files
+MOVED = {
+    "tol_ddp": ("ddp", "tol"), "ddp_min_iter": ("ddp", "min_iter"),
+    "ddp_max_iter": ("ddp", "max_iter"), "ddp_stall_iter": ("ddp", "stall_iter"),
+    "ddp_stall_alpha": ("ddp", "stall_alpha"),
+    **{k: ("ddp", k) for k in ("rho_init", "rho_min", "rho_max", "rho_factor", "ls_min_ratio",
+                               "ls_max_ratio", "ls_shrink", "ls_max_halvings", "short_step",
+                               "short_step_rho_growth", "globalization", "stage_trust",
+                               "tr_ratio_tol", "tr_kappa", "carry_rho")},
+    "tol_aul": ("aul", "tol"), "aul_max_iter": ("aul", "max_iter"),
+    "aul_stall_iter": ("aul", "stall_iter"),
+    **{k: ("aul", k) for k in ("lambda_max", "mu_init", "mu_max", "mu_growth", "tr_fallback")},
+    "tol_newton": ("newton", "tol"),
+    **{f"newton_{k}": ("newton", k) for k in ("max_iter", "inner_max_iter", "ls_shrink",
+                                              "ls_max_halvings", "stall_iter", "cv_ratio",
+                                              "active_tol", "regularisation",
+                                              "control_weight_floor")},
+    "map_reach": ("newton", "map_reach"), "polish_from_ddp_maps": ("newton", "polish_from_ddp_maps"),
+    "restore_start": ("start", "restore"),
+    "tol_optimality": ("kkt", "tol"),
+    **{f"kkt_{k}": ("kkt", k) for k in ("max_iter", "cost_slack", "trial_violation",
+                                        "chord_iter", "restore_iter")},
+    "kkt_resolves": ("end_game", "resolves"),
+    **{k: ("end_game", k) for k in ("exact_fuel", "exact_fuel_max_iter", "exact_fuel_stall_iter",
+                                    "exact_fuel_end_stall_iter", "path_exchange_rounds")},
+    "time_budget_s": ("run", "time_budget_s"), "verbose": ("run", "verbose"),
+}
+
+
+def _homotopy(steps) -> tuple:
+    """The (h, delta) steps as a tuple of float pairs (DaddyError naming the field)."""
+    try:
+        hom = tuple(tuple(map(float, p)) for p in steps)
+    except (TypeError, ValueError) as exc:
+        raise DaddyError("options.homotopy must be a sequence of (h, delta) number pairs") \
+            from exc
+    if not hom or any(len(p) != 2 or not (0 <= p[0] <= 1) or not p[1] > 0 for p in hom):
+        raise DaddyError("options.homotopy must be a non-empty sequence of (h in [0, 1], "
+                         "delta > 0)")
+    return hom
+
+
+@dataclass(frozen=True, init=False)
+class SolverOptions:
+    """Every tolerance and limit of a solve, one group per algorithm (each group's fields are
+    documented where the group is defined): ``ddp``, ``aul``, ``newton``, ``start``, ``kkt``,
+    ``end_game``, ``run``, and ``homotopy``, the (h, delta) steps of eq. 12-14.
+
+    A group is given as its object or as a dict of its fields, e.g.
+    ``SolverOptions(ddp=dict(tol=1e-6), kkt=dict(max_iter=50))``; ``with_`` replaces fields the
+    same way, a dict merging into the group it names. A field under its old flat name
+    (``tol_ddp``) is a DaddyError naming its new place (``ddp.tol``).
+    """
+
+    ddp: DDPOptions
+    aul: AULOptions
+    newton: NewtonOptions
+    start: StartOptions
+    kkt: KKTOptions
+    end_game: EndGameOptions
+    run: RunOptions
+    homotopy: tuple
+
+    def __init__(self, homotopy=((0.0, 1e-2),), **groups):
+        for name, value in groups.items():
+            if name not in GROUPS:
+                raise DaddyError(_unknown(name))
+        for name, cls in GROUPS.items():
+            value = groups.get(name, cls())
+            if isinstance(value, dict):
+                unknown = sorted(set(value) - {f.name for f in fields(cls)})
+                if unknown:
+                    raise DaddyError(f"options.{name}.{unknown[0]} is not an option (known: "
+                                     f"{', '.join(f.name for f in fields(cls))})")
+                value = cls(**value)
+            elif not isinstance(value, cls):
+                raise DaddyError(f"options.{name} must be a {cls.__name__} or a dict of its "
+                                 f"fields, got {type(value).__name__}")
+            object.__setattr__(self, name, value)
+        object.__setattr__(self, "homotopy", _homotopy(homotopy))
 
     @property
     def eps_da(self) -> float:
         """Accuracy of the Dyn method's polynomial radius: min(eps_AUL, eps_DDP)."""
-        return min(self.tol_aul, self.tol_ddp)
+        return min(self.aul.tol, self.ddp.tol)
 
-    def with_(self, **kw) -> "SolverOptions":
-        return replace(self, **kw)
+    def with_(self, **changes) -> "SolverOptions":
+        """A copy with groups replaced: a group object, or a dict of fields merged into it;
+        ``homotopy``: new steps."""
+        kw = {name: getattr(self, name) for name in GROUPS}
+        kw["homotopy"] = changes.pop("homotopy", self.homotopy)
+        for name, value in changes.items():
+            if name not in GROUPS:
+                raise DaddyError(_unknown(name))
+            kw[name] = getattr(self, name).with_(**value) if isinstance(value, dict) else value
+        return SolverOptions(**kw)
+
+    @classmethod
+    def warm_replan(cls, cold: "SolverOptions", tol_aul: float, active_tol: float,
+                    restore_first: bool) -> "SolverOptions":
+        """The guidance node's warm re-plan from its last plan (``daddy_ros.replan_policy``:
+        why each setting): the last homotopy step only, one DDP iteration may stop it, the
+        penalty started high and rho carried, no stall rules, no KKT residual, the polishing
+        from DDP's maps with a wider active set, no per-stage trust region."""
+        return cold.with_(
+            homotopy=cold.homotopy[-1:],
+            ddp=dict(min_iter=1, short_step=0.5, carry_rho=True, stage_trust=False),
+            aul=dict(tol=tol_aul, mu_init=WARM_MU_INIT, stall_iter=0),
+            newton=dict(stall_iter=0, polish_from_ddp_maps=True,
+                        active_tol=max(active_tol, cold.newton.active_tol)),
+            kkt=dict(tol=math.inf), start=dict(restore=bool(restore_first)))
 
 
-def case_options(case, fuel_optimal: bool, **overrides) -> SolverOptions:
-    """The paper's solver settings for a catalogue case."""
+# a warm re-plan's starting penalty: three growth steps below the cap, where a plan's
+# multipliers already hold the constraints
+WARM_MU_INIT = 1e5
+
+
+def _unknown(name: str) -> str:
+    """The error of an unknown option name: its new place when it is an old flat name."""
+    if name in MOVED:
+        group, field = MOVED[name]
+        return (f"options.{name} is now options.{group}.{field}: give "
+                f"{group}=dict({field}=...)")
+    return f"options.{name} is not an option group (groups: {', '.join(GROUPS)}, homotopy)"
+
+
+# a case file's per-case solver settings (``catalogue.cases.SOLVER_KEYS``) and where they go
+_CASE_SETTINGS = ("tol_ddp", "tol_aul", "tol_newton", "rho_max")
+
+
+def case_options(case, fuel_optimal: bool, **changes) -> SolverOptions:
+    """The paper's solver settings for a catalogue case (its ``solver`` section), with
+    ``changes`` as ``SolverOptions.with_`` takes them."""
     s = case.solver
     hom = s.get("homotopy", {"h": [0.0], "delta": [1e-2]})
     pairs = tuple(zip(hom["h"], hom["delta"])) if fuel_optimal else ((0.0, hom["delta"][0]),)
-    kw = dict(tol_ddp=s.get("tol_ddp", 1e-4), tol_aul=s.get("tol_aul", 1e-6),
-              tol_newton=s.get("tol_newton", 1e-10), rho_max=s.get("rho_max", 1e8), homotopy=pairs)
-    kw.update(overrides)
-    return SolverOptions(**kw)
+    groups: dict = {}
+    for key in _CASE_SETTINGS:
+        if key in s:
+            group, field = MOVED[key]
+            groups.setdefault(group, {})[field] = s[key]
+    return SolverOptions(homotopy=pairs, **groups).with_(**changes)
 
 
-__all__ = ["METHODS", "Globalization", "Method", "SolverOptions", "Sweep", "case_options"]
+__all__ = ["AULOptions", "DDPOptions", "EndGameOptions", "GROUPS", "Globalization", "KKTOptions",
+           "METHODS", "Method", "NewtonOptions", "RunOptions", "SolverOptions", "StartOptions",
+           "Sweep", "case_options"]

@@ -40,24 +40,24 @@ def _last_step(problem: Problem, sol: Solution, opts: SolverOptions) -> tuple:
 
 def hold(problem: Problem, sol: Solution, resolve, opts: SolverOptions, progress) -> Solution:
     """``sol`` of ``problem`` with g_path held between the nodes: up to
-    ``opts.path_exchange_rounds`` rounds of (dense check, tighten the offending stages' samples,
+    ``opts.end_game.path_exchange_rounds`` rounds of (dense check, tighten the offending stages' samples,
     ``resolve(problem, warm start, options)`` the last homotopy step from ``sol``). Returns the
     last solve's Solution with ``min_path_margin`` (the dense check's) and every round's work
     counted; ``converged`` is False, and the reason names the stage, when the constraint is
     still violated between the nodes by more than tol_newton."""
     start, first, later = time.perf_counter(), sol, []
     pm = dense_margin(problem, sol.X, sol.U)
-    while len(later) < opts.path_exchange_rounds and sol.max_violation <= opts.tol_aul:
-        offset = tightened(problem.path_offset, pm, opts.tol_newton)
+    while len(later) < opts.end_game.path_exchange_rounds and sol.max_violation <= opts.aul.tol:
+        offset = tightened(problem.path_offset, pm, opts.newton.tol)
         if offset is None:
             break
         options = opts.with_(homotopy=(_last_step(problem, sol, opts),))
-        if opts.time_budget_s is not None:   # the first solve's time and every round's since
-            left = opts.time_budget_s - first.runtime_s.get("total", 0.0) \
+        if opts.run.time_budget_s is not None:   # the first solve's time and every round's since
+            left = opts.run.time_budget_s - first.runtime_s.get("total", 0.0) \
                 - (time.perf_counter() - start)
             if left <= 0:
                 break
-            options = options.with_(time_budget_s=left)
+            options = options.with_(run=dict(time_budget_s=left))
         if progress is not None:
             progress(f"path exchange {len(later) + 1}: g_path rises {-pm.margin:.2e} above its "
                      f"bound between the samples (stage {pm.stage}, tau {pm.tau:.3f}): the "
@@ -67,7 +67,7 @@ def hold(problem: Problem, sol: Solution, resolve, opts: SolverOptions, progress
         later.append(sol)
         pm = dense_margin(problem, sol.X, sol.U)
     out = replace(_merged(first, later) if later else sol, min_path_margin=pm.margin)
-    if out.converged and not pm.margin >= -opts.tol_newton:
+    if out.converged and not pm.margin >= -opts.newton.tol:
         out = replace(out, converged=False,
                       reason=f"g_path holds at its samples but not between them: "
                              f"{-pm.margin:.2e} above its bound at stage {pm.stage} "

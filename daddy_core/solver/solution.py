@@ -33,7 +33,7 @@ class Solution:
             (``solver.optimality``: the least-squares KKT residual, stationarity and
             complementarity, relative to the largest cost-gradient component; 0 at a KKT
             point); None when it was not evaluated (an iterate that does not meet the
-            constraints, ``SolverOptions.tol_optimality`` = inf) or could not be.
+            constraints, ``SolverOptions.kkt.tol`` = inf) or could not be.
         violations: every constraint's largest violation, largest first
             (``Problem.violation_report``: name, violation, stage); a solve that did not
             converge also names the largest in ``reason``.
@@ -52,7 +52,7 @@ class Solution:
             warm start from this solution rolls out and restores with them.
         min_path_margin: the true minimum margin of ``Problem.g_path`` between the nodes
             (dense DOP853 re-propagation, in g_path's units; >= 0: held everywhere), after the
-            exchange rounds (``SolverOptions.path_exchange_rounds``); None without g_path.
+            exchange rounds (``SolverOptions.end_game.path_exchange_rounds``); None without g_path.
     """
 
     case: str
@@ -99,7 +99,7 @@ class Solution:
     def fuel_step(self) -> tuple | None:
         """(h, delta) of the last pseudo-Huber homotopy step the solve ran (h > 0), or None: an
         energy-optimal solve, or a fuel-optimal one whose exact end game converged from the
-        energy step's solution before any (``SolverOptions.exact_fuel``)."""
+        energy step's solution before any (``SolverOptions.end_game.exact_fuel``)."""
         for step in reversed(self.history):
             if step.get("h", 0.0) > 0:
                 return (step["h"], step["delta"])
@@ -194,7 +194,7 @@ class WarmStart:
     Attributes:
         U: (N, nu) initial controls (None: 1e-6 on every component).
         duals: multipliers {"lam": (n_c, N), "lam_t": (n_t,)} (used where their shapes fit).
-        rho: Quu regularisation to resume from (None: ``SolverOptions.rho_init``).
+        rho: Quu regularisation to resume from (None: ``SolverOptions.ddp.rho_init``).
         maps: stage maps of a nearby trajectory with the problem's stages: the initial rollout
             evaluates them where a stage lies inside their radius (Alg. 8) and the Newton
             restoration re-centres them instead of expanding.

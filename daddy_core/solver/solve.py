@@ -40,22 +40,22 @@ def solve(problem: Problem, u_guess=None, method: Method | str = Method.DYN,
             (False). None: the whole homotopy when it has more than one step.
         polish: finish with the Newton polishing (Alg. 11) and the KKT end game.
         options: ``SolverOptions``.
-        progress: callable receiving progress lines (or None; ``options.verbose``: print).
+        progress: callable receiving progress lines (or None; ``options.run.verbose``: print).
     Returns:
         a ``Solution``. A solve that fails returns ``converged=False`` with the reason and the
         best feasible-so-far iterate (never NaN).
     """
     opts = options or SolverOptions()
     method = Method.parse(method)
-    if progress is None and opts.verbose:
+    if progress is None and opts.run.verbose:
         progress = print
 
     def once(p: Problem, guess, fuel: bool | None, o: SolverOptions) -> Solution:
-        warm = WarmStart.of(guess, p.stage_dt, o.carry_rho, p.t_start)
+        warm = WarmStart.of(guess, p.stage_dt, o.ddp.carry_rho, p.t_start)
         U0 = p.check_guess(np.full((p.N, p.nu), 1e-6) if warm.U is None else warm.U)
         ctx = SolveContext(p, method, o, homotopy_steps(p, U0, o, fuel), polish,
-                           Clock(o.time_budget_s), progress=progress, rho0=warm.rho)
-        why = None if p.g_path is None else violated_at_start(p, U0[0], o.tol_newton)
+                           Clock(o.run.time_budget_s), progress=progress, rho0=warm.rho)
+        why = None if p.g_path is None else violated_at_start(p, U0[0], o.newton.tol)
         if why is not None:
             return unsolved(p, U0, why, ctx.steps, method, case_name)
         game = end_game.opening(ctx, start(ctx, U0, warm), warm.duals)

@@ -1,5 +1,5 @@
 """Where DDP starts: the initial rollout (through a warm start's stage maps where they reach)
-and, with ``SolverOptions.restore_start``, Newton's restoration of feasibility (paper Alg. 11 on the
+and, with ``SolverOptions.start.restore``, Newton's restoration of feasibility (paper Alg. 11 on the
 guess) with its named fallbacks: the ballistic trajectory for a cold guess Newton cannot
 restore, and the problem without ``g_path`` for a start that meets everything else.
 """
@@ -30,19 +30,19 @@ class Start:
 
 
 def start(ctx: SolveContext, U0: np.ndarray, warm: WarmStart) -> Start:
-    """The initial rollout of U0 (N, nu) and, with ``opts.restore_start``, its restoration."""
+    """The initial rollout of U0 (N, nu) and, with ``opts.start.restore``, its restoration."""
     problem, opts = ctx.problem, ctx.opts
     maps = warm.maps
     if maps is not None and maps.N != problem.N:
         raise DaddyError(f"maps cover {maps.N} stages, the problem has {problem.N}")
     # a start for the Newton restoration only needs to be near (its residuals are exact): the
     # maps then serve stages up to map_reach radii
-    reach = opts.map_reach if opts.restore_start else 1.0
+    reach = opts.newton.map_reach if opts.start.restore else 1.0
     with ctx.clock.phase("rollout"):
         X = problem.rollout(U0) if maps is None else maps.rollout(problem, U0, reach)[0]
     if not np.all(np.isfinite(X)):
         raise DaddyError("the initial guess propagates to a non-finite state")
-    if not opts.restore_start:
+    if not opts.start.restore:
         return Start(X, U0)
     with ctx.clock.phase("restore"):
         return _restored(ctx, X, U0, maps, cold=maps is None and warm.duals is None,
@@ -69,7 +69,7 @@ def _restored(ctx: SolveContext, X, U0, maps, cold: bool, reach: float) -> Start
             # DDP starts from the Newton model's maps, re-centred as Newton re-centres them,
             # with the restored flows as their values
             st.F = newton.exact_valued_maps(problem, res.maps, res.X, res.U, res.X[1:].T,
-                                            ctx.opts.map_reach)
+                                            ctx.opts.newton.map_reach)
     elif maps is not None and reach > 1:
         st.X = maps.rollout(problem, U0)[0]   # DDP starts from a consistent trajectory
     else:   # DDP starts from the guess, where Newton's first model expanded the stages

@@ -31,11 +31,11 @@ def crawling(steps: list, opts: SolverOptions) -> bool:
     search (``ddp(retry=True)``): there it is the smallest radius / full step of a stage
     (``Gains.shortest``), and a rejected step after the first accepted one is a step of length
     zero (``Stopping.after_rejection``)."""
-    k = opts.ddp_stall_iter
+    k = opts.ddp.stall_iter
     if k <= 0 or len(steps) <= k:
         return False
-    return all(fraction < opts.ddp_stall_alpha
-               and before - after < opts.tol_ddp * max(abs(before), 1e-300)
+    return all(fraction < opts.ddp.stall_alpha
+               and before - after < opts.ddp.tol * max(abs(before), 1e-300)
                for (before, _), (after, fraction) in zip(steps[-k - 1:-1], steps[-k:]))
 
 
@@ -58,8 +58,8 @@ class Stopping:
         opts = self.opts
         rel = (J - trial_cost) / max(abs(J), 1e-300)
         self.steps.append((J_new, alpha * (gains.shortest if self.retry else 1.0)))
-        if (it >= opts.ddp_min_iter and 0.0 <= rel < opts.tol_ddp and not gains.clipped
-                and (alpha >= 0.5 or full_step_gain < opts.tol_ddp)):
+        if (it >= opts.ddp.min_iter and 0.0 <= rel < opts.ddp.tol and not gains.clipped
+                and (alpha >= 0.5 or full_step_gain < opts.ddp.tol)):
             return Status.DDP_CONVERGED
         return Status.DDP_STALLED if crawling(self.steps, opts) else None
 
@@ -68,8 +68,8 @@ class Stopping:
         """The line search found no step that its model predicts, for a full step worth less
         than tol_ddp: the mismatch is the forward pass's noise (round-off, the Dyn rollout's
         truncation), which raising rho to rho_max would spend the budget on."""
-        return (not trust_region and it > self.opts.ddp_min_iter
-                and 0.0 <= full_step_gain < self.opts.tol_ddp and not gains.clipped)
+        return (not trust_region and it > self.opts.ddp.min_iter
+                and 0.0 <= full_step_gain < self.opts.ddp.tol and not gains.clipped)
 
     def after_rejection(self, J: float) -> Status | None:
         """A rejected step of the retry after its first accepted one counts as a step of length

@@ -586,7 +586,7 @@ def solver_faults(sizes: Sizes, workdir: Path) -> list[Row]:
             raise RuntimeError("no OK answer before injecting faults")
         faults = {
             "no convergence": lambda: setattr(pl, "policy", policy.with_warm(
-                ddp_max_iter=1, aul_max_iter=1, newton_max_iter=1)),
+                ddp=dict(max_iter=1), aul=dict(max_iter=1), newton=dict(max_iter=1))),
             "time budget": lambda: node.set_parameters([Parameter("time_budget_s", value=1e-3)]),
             "dynamics raise": lambda: setattr(pl, "base_problem", replace(
                 base, step=faulty_step(base.step, 3, "raise"))),
@@ -814,14 +814,18 @@ def core_api(sizes: Sizes, workdir: Path) -> list[Row]:
             m = draw(st.text(max_size=12).filter(
                 lambda s: s.lower() not in ("std", "hess", "q", "dyn", "hessdyn", "qdyn")))
             return kind, lambda: solve(good, np.zeros((N, nu)), method=m), "method"
-        name = draw(st.sampled_from(["tol_ddp", "tol_aul", "tol_newton", "ddp_max_iter",
-                                     "mu_init", "time_budget_s", "homotopy"]))
-        v = draw(st.sampled_from([-1.0, math.nan, "x"] + ([0.0] if name.startswith("tol") or
-                                                           name == "time_budget_s" else [])))
-        if name == "homotopy":
+        group, field = draw(st.sampled_from([("ddp", "tol"), ("aul", "tol"), ("newton", "tol"),
+                                             ("ddp", "max_iter"), ("aul", "mu_init"),
+                                             ("run", "time_budget_s"), ("homotopy", None)]))
+        v = draw(st.sampled_from([-1.0, math.nan, "x"] + ([0.0] if field in ("tol", "time_budget_s")
+                                                          else [])))
+        if group == "homotopy":
             v = draw(st.sampled_from([(), ((2.0, 1e-2),), ((0.0, -1.0),), ((0.5,),)]))
-        return kind, lambda: solve(good, np.zeros((N, nu)), options=SolverOptions(**{name: v})), \
-            name
+            return kind, lambda: solve(good, np.zeros((N, nu)), options=SolverOptions(homotopy=v)), \
+                "homotopy"
+        return kind, lambda: solve(good, np.zeros((N, nu)),
+                                   options=SolverOptions(**{group: {field: v}})), \
+            f"{group}.{field}"
 
     @settings(max_examples=sizes.api_calls, database=None, deadline=None,
               suppress_health_check=list(HealthCheck))
