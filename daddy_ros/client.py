@@ -10,18 +10,16 @@ from __future__ import annotations
 import threading
 import time
 
-from diagnostic_msgs.msg import DiagnosticArray
-from geometry_msgs.msg import InertiaStamped, Vector3Stamped
+from geometry_msgs.msg import InertiaStamped
 from lifecycle_msgs.srv import ChangeState, GetState
-from nav_msgs.msg import Odometry
 from rcl_interfaces.srv import GetParameters, SetParameters
 from rclpy.node import Node
 from std_msgs.msg import Header
 from std_srvs.srv import Trigger
-from trajectory_msgs.msg import JointTrajectory
 
 from . import conversions as cv
-from .guidance_node import LATCHED, NODE_NAME, RELIABLE
+from . import interface as io
+from .interface import NODE_NAME, RELIABLE
 from .spin import SpinThread
 
 
@@ -49,11 +47,12 @@ class GuidanceClient:
         self.node = Node(name, namespace=namespace or None)
         n = self.node
         node = f"{namespace.rstrip('/')}/{node}" if namespace else node
-        self.pub_state = n.create_publisher(Odometry, "state_estimate", RELIABLE)
-        self.pub_mass = n.create_publisher(InertiaStamped, "mass_estimate", RELIABLE)
-        self.pub_req = n.create_publisher(Header, "replan_request", RELIABLE)
+        # (reliable publishers: the node's sensor-data subscriptions accept them)
+        self.pub_state, self.pub_mass, self.pub_req = (
+            n.create_publisher(t.msg_type, t.default, RELIABLE)
+            for t in (io.STATE, io.MASS, io.REQUEST))
         node = node if node.startswith("/") else f"/{node}"
-        self.trigger = n.create_client(Trigger, f"{node}/replan")
+        self.trigger = n.create_client(Trigger, f"{node}/{io.REPLAN_SERVICE.removeprefix('~/')}")
         self.set_params = n.create_client(SetParameters, f"{node}/set_parameters")
         self.get_params = n.create_client(GetParameters, f"{node}/get_parameters")
         self.change_state = n.create_client(ChangeState, f"{node}/change_state")
@@ -61,12 +60,10 @@ class GuidanceClient:
         self.cond = threading.Condition()
         self.schedules, self.diags, self.thrust = [], [], []
         self._parsed = (None, None)   # (the newest schedule message, its conversion)
-        n.create_subscription(JointTrajectory, "control_schedule",
-                              lambda m: self._add(self.schedules, m), LATCHED)
-        n.create_subscription(DiagnosticArray, "/diagnostics", lambda m: self._add(self.diags, m),
-                              RELIABLE)
-        n.create_subscription(Vector3Stamped, "thrust_command",
-                              lambda m: self._add(self.thrust, m), RELIABLE)
+        for topic, bucket in ((io.SCHEDULE, self.schedules), (io.DIAGNOSTICS, self.diags),
+                              (io.THRUST, self.thrust)):
+            n.create_subscription(topic.msg_type, topic.default,
+                                  lambda m, b=bucket: self._add(b, m), topic.qos)
         self.spinner = SpinThread(n)
 
     def _add(self, bucket: list, msg) -> None:

@@ -5,11 +5,18 @@ the solver worker needs.
 """
 from __future__ import annotations
 
+import signal
+import sys
 import threading
+from collections.abc import Callable
+from typing import Protocol
 
 import rclpy
 from rclpy.executors import SingleThreadedExecutor
 from rclpy.node import Node
+from rclpy.signals import SignalHandlerOptions
+
+from daddy_core.errors import DaddyError
 
 
 def spin_guarded(executor, stop: threading.Event, on_error=None) -> None:
@@ -48,3 +55,51 @@ class SpinThread:
         self._stop.set()
         self._thread.join(timeout_sec)
         self.executor.shutdown(timeout_sec=timeout_sec)
+
+
+class ServedNode(Protocol):
+    """What ``run_node`` needs of a node: rclpy's Node, a helper node for a blocking service
+    (or None), a way to stop its worker, and where an escaped callback error is reported."""
+
+    service_node: Node | None
+
+    def stop(self) -> None: ...
+
+    def report_internal_error(self, exc: BaseException) -> None: ...
+
+    def destroy_node(self) -> None: ...
+
+
+def run_node(node_factory: Callable[[], ServedNode], args=None) -> int:
+    """Spin a node with our own SIGINT/SIGTERM handling and a clean shutdown sequence; 2 when
+    the node cannot be built (a bad parameter: the message on stderr).
+
+    The node's callbacks run on a single-threaded executor; a blocking service hosted on
+    ``node.service_node`` gets its own executor thread so it never stalls the subscriptions.
+    The ROS environment (discovery range, domain) is the caller's: nothing is set here."""
+    rclpy.init(args=args, signal_handler_options=SignalHandlerOptions.NO)
+    stop = threading.Event()
+    for sig in (signal.SIGINT, signal.SIGTERM):
+        signal.signal(sig, lambda *_: stop.set())
+    try:
+        node = node_factory()
+    except DaddyError as exc:   # a bad parameter (unknown scenario, unreadable plan file, ...)
+        print(f"guidance_node: {exc}", file=sys.stderr)
+        rclpy.try_shutdown()
+        return 2
+    executor = SingleThreadedExecutor()
+    executor.add_node(node)
+    side = node.service_node
+    side_executor = SpinThread(side) if side is not None else None
+    try:
+        spin_guarded(executor, stop, node.report_internal_error)
+    finally:
+        node.stop()
+        for ex in (executor, side_executor):
+            if ex is not None:
+                ex.shutdown(timeout_sec=2.0)
+        node.destroy_node()
+        if side is not None:
+            side.destroy_node()
+        rclpy.try_shutdown()
+    return 0

@@ -1,0 +1,70 @@
+"""The node's ROS parameters, declared from the one parameter table (``config``), and the
+validation of run-time updates (a pre-set callback in the way of ``demo_nodes_py``'s: a
+rejected update changes nothing)."""
+from __future__ import annotations
+
+import math
+
+from rcl_interfaces.msg import (FloatingPointRange, IntegerRange, ParameterDescriptor,
+                                SetParametersResult)
+from rclpy.exceptions import InvalidParameterTypeException, InvalidParameterValueException
+
+from daddy_core.catalogue import list_cases, load_case
+from daddy_core.errors import DaddyError
+
+from .config import Parameter, parameters
+
+NAMES = {p.name for p in parameters()}
+RUNTIME = {p.name for p in parameters() if p.runtime}   # time_budget_s, staleness_s
+
+
+def descriptor(p: Parameter) -> ParameterDescriptor:
+    """The ROS descriptor of a ``config`` parameter: its description, read_only for the
+    ``static`` ones, its range where it has bounds, and when it may change."""
+    when = ("settable in every state" if p.runtime else "fixed at construction" if p.static
+            else "settable while unconfigured")
+    d = ParameterDescriptor(description=p.description, read_only=p.static,
+                            additional_constraints=when)
+    if p.bounds is not None:
+        lo, hi = p.bounds
+        if isinstance(p.default, float):
+            d.floating_point_range = [FloatingPointRange(from_value=float(lo), to_value=float(hi),
+                                                         step=0.0)]
+        else:
+            d.integer_range = [IntegerRange(from_value=int(lo), to_value=int(hi), step=1)]
+    return d
+
+
+def declare(node, overrides: dict) -> None:
+    """Declare every parameter of ``config`` on ``node`` (``overrides``: other defaults); a
+    value of the wrong type or out of range is a DaddyError naming the parameter."""
+    for p in parameters():
+        try:
+            node.declare_parameter(p.name, overrides.get(p.name, p.default), descriptor(p))
+        except (InvalidParameterValueException, InvalidParameterTypeException) as exc:
+            raise DaddyError(f"parameter {p.name}: {exc}") from exc
+
+
+def problem(p, has_parameter, configured: bool) -> str:
+    """Why the update of parameter ``p`` is refused ('' when it is not): the ``runtime`` ones
+    (positive finite floats) in every state, every other declared one only while unconfigured
+    (configure reads them); an unknown scenario always."""
+    if p.name in RUNTIME:
+        if not (isinstance(p.value, float) and math.isfinite(p.value) and p.value > 0):
+            return f"{p.name} must be a positive finite float, got {p.value!r}"
+        return ""
+    if p.name == "scenario" and isinstance(p.value, str):
+        try:
+            load_case(p.value)
+        except DaddyError:
+            return (f"scenario {p.value!r} is unknown (known: {', '.join(list_cases())}); "
+                    "scenario is also read-only once configured")
+    if p.name in NAMES and has_parameter(p.name) and configured:
+        return f"{p.name} is read-only once configured (clean the node up to change it)"
+    return ""
+
+
+def verdict(params, has_parameter, configured: bool) -> SetParametersResult:
+    """The result of a set-parameters request: the first problem, or success."""
+    why = next((r for r in (problem(p, has_parameter, configured) for p in params) if r), None)
+    return SetParametersResult(successful=why is None, reason=why or "")

@@ -1,0 +1,269 @@
+"""One guidance session, ROS-free: what the node does between its messages. Accepted estimates
+go into the request queue and get their thrust command from the plan in force -- or, when the
+re-plan policy (``self_trigger``) asks for a re-plan, after it; a worker thread serves the
+queue's requests with ``GuidancePlanner.replan``; plans are adopted (the bundled nominal at the
+first estimate), persisted after every new plan and restored after a crash.
+
+The node hands the session an ``Outputs`` (its publishers and diagnostics) and translates
+messages; the session never sees a message type.
+"""
+from __future__ import annotations
+
+import threading
+import time
+from pathlib import Path
+from typing import TYPE_CHECKING, Protocol
+
+import numpy as np
+
+from daddy_core.errors import DaddyError
+
+from .checks import InputRejected
+from .plan import Code, Level, Plan
+from .planner import GuidancePlanner
+from .request_queue import RequestQueue
+from .self_trigger import ReplanTrigger
+
+if TYPE_CHECKING:   # (a plain dataclass of the estimate; its module also converts messages)
+    from .conversions import OdometryState as StateEstimate
+
+
+class Outputs(Protocol):
+    """What a session publishes: the plan (schedule and path), thrust commands [N] for an
+    estimate's stamp, diagnostic events, and the last solve (for the health status)."""
+
+    def publish_plan(self, plan: Plan, stamp: float | None) -> None: ...
+
+    def publish_thrust(self, thrust_n: np.ndarray, stamp: float) -> None: ...
+
+    def diag(self, level: Level, code: Code, message: str, values: dict, stamp,
+             log_every_s: float | None = None) -> None: ...
+
+    def solved(self, level: Level, reason: str, solve_s: float | None) -> None: ...
+
+
+class GuidanceSession:
+    """The planner, the request queue, the re-plan policy and the worker of one configured node.
+
+    plan_file: the nominal plan adopted at the first estimate ('' none); persist_file: where the
+    plan in force is kept for crash recovery ('' none); active: whether thrust may be commanded
+    (a callable: the node's lifecycle state)."""
+
+    def __init__(self, planner: GuidancePlanner, trigger: ReplanTrigger | None, plan_file: str,
+                 persist_file: str, outputs: Outputs, active):
+        self.planner, self.trigger, self.out, self.active = planner, trigger, outputs, active
+        self.plan_file, self.persist_file = plan_file, persist_file
+        self.queue = RequestQueue()
+        self.replans = 0
+        self._withheld: list[float] = []   # estimate stamps whose thrust waits for a re-plan
+        self._withheld_lock = threading.Lock()
+        self._replan_on_first_estimate = False
+        self._worker = threading.Thread(target=self._work, name="daddy_replan", daemon=True)
+        self._worker.start()
+        if persist_file and Path(persist_file).exists():
+            self._restore()
+
+    # ------------------------------------------------------------------ inputs
+    def on_state(self, est: StateEstimate, stamp: float) -> None:
+        """An estimate whose frame the node has checked (InputRejected naming the field when
+        the planner's checks refuse it)."""
+        self.planner.checks.check_estimate(est.pos_m, est.vel_m_s, stamp)
+        self.queue.add_state(est.pos_m, est.vel_m_s, stamp, est.pos_sigma_m, est.vel_sigma_m_s)
+        plan = self.planner.plan or self._adopt_nominal()
+        # an estimate that triggers a re-plan gets its thrust command after it (_finish)
+        if plan is not None and not self._self_triggered(est, stamp, plan):
+            self.out.publish_thrust(plan.command_at(stamp, est.pos_m, est.vel_m_s), stamp)
+        self._maybe_replan_after_restart()
+
+    def on_mass(self, mass: float, stamp: float) -> None:
+        self.planner.checks.check_mass(mass, stamp)
+        self.queue.add_mass(stamp, mass)
+        if self.planner.plan is None:
+            self._adopt_nominal()
+        self._maybe_replan_after_restart()
+
+    def request(self, request_id: str, stamp: float | None) -> str:
+        """Queue a re-plan request; returns the id that will serve it."""
+        return self.queue.enqueue(request_id, stamp)
+
+    def request_and_wait(self) -> tuple[bool, str]:
+        """A blocking re-plan (the Trigger service): (success, message)."""
+        target = self.queue.enqueue(f"service-{time.monotonic_ns()}", None)
+        # the next solve to start absorbs this request (coalescing); wait for it to finish
+        done, (level, reason, stored) = self.queue.wait_done(
+            target, self.planner.time_budget_s * 3 + 10)
+        return (done and stored and level is not Level.ERROR,
+                f"{level}: {reason}" if done else "timed out waiting for the solve")
+
+    def _self_triggered(self, est: StateEstimate, stamp: float, plan: Plan) -> bool:
+        """Ask the re-plan policy about an accepted estimate; when a re-plan is due, queue it
+        and withhold the estimate's thrust command until it has finished."""
+        mass = self.queue.mass_for(stamp)
+        if self.trigger is None or mass is None:
+            return False
+        reason = self.trigger.observe(stamp, est.pos_m, est.vel_m_s, mass, plan)
+        if reason is None:
+            return False
+        with self._withheld_lock:
+            self._withheld.append(stamp)
+        self.queue.enqueue(f"self-{reason}-{stamp:.3f}", stamp)
+        return True
+
+    def _maybe_replan_after_restart(self) -> None:
+        if self._replan_on_first_estimate and self.queue.has_estimates():
+            self._replan_on_first_estimate = False
+            self.queue.enqueue("restart", None)
+
+    # ------------------------------------------------------------------ plans
+    def _restore(self) -> None:
+        """Start-up after a crash: adopt the persisted plan and re-plan at the first estimate."""
+        try:
+            plan = self.planner.restore_plan(self.persist_file)
+        except DaddyError as exc:
+            self.out.diag(Level.ERROR, Code.PLAN_FILE_ERROR, f"persist_file not restored: {exc}",
+                          {"field": "persist_file"}, None)
+            return
+        self.out.publish_plan(plan, None)
+        self._replan_on_first_estimate = True
+        self.out.diag(Level.WARN, Code.RESTORED,
+                      f"restored the persisted plan (epoch {plan.epoch_s:.3f} s); re-planning "
+                      "at the first estimate", {"request_id": "restored"}, plan.epoch_s)
+
+    def _persist(self) -> str:
+        """Write the current plan to persist_file (if set); returns a problem or ''."""
+        if not self.persist_file:
+            return ""
+        try:
+            self.planner.save_plan(self.persist_file)
+        except (OSError, ValueError) as exc:
+            return f"persist_file not written: {exc}"
+        return ""
+
+    def _adopt_nominal(self) -> Plan | None:
+        """Adopt the nominal plan at the first estimate (state and mass both received)."""
+        state = self.queue.state_for(None)
+        plan_file = self.plan_file
+        if not plan_file or state is None or not self.queue.has_estimates():
+            return None
+        stamp = state.stamp_s
+        try:
+            plan = self.planner.load_plan(plan_file, stamp)
+        except Exception as exc:
+            self.out.diag(Level.ERROR, Code.PLAN_FILE_ERROR, f"cannot load plan_file: {exc}", {},
+                          stamp)
+            self.plan_file = ""
+            return None
+        self.out.publish_plan(plan, stamp)
+        self._persist()
+        self.out.diag(Level.OK, Code.PLAN_ADOPTED, f"adopted nominal plan {Path(plan_file).name}",
+                      {"request_id": "nominal"}, stamp)
+        return plan
+
+    def adopt_plan(self, plan: Plan) -> None:
+        """Make ``plan`` the current plan and publish it (e.g. a nominal computed elsewhere)."""
+        self.planner.set_plan(plan)
+        self.out.publish_plan(plan, plan.epoch_s)
+        self._persist()
+        self.out.diag(Level.OK, Code.PLAN_ADOPTED, "adopted a plan",
+                      {"request_id": plan.request_id or "adopted"}, plan.epoch_s)
+
+    # ------------------------------------------------------------------ worker
+    def _work(self) -> None:
+        while True:
+            req = self.queue.take()
+            if req is None:
+                return
+            try:
+                self._replan_once(req.request_id, req.stamp_s)
+            except Exception as exc:  # never let the worker die
+                self._finish(req.request_id, None, Level.ERROR, Code.INTERNAL_ERROR,
+                             f"internal error: {exc!r}", None)
+            finally:
+                self.queue.done()
+
+    def _replan_once(self, request_id: str, request_stamp: float | None) -> None:
+        started = {"solve_start_unix_s": f"{time.time():.6f}"}
+        try:
+            state = self.queue.state_for(request_stamp)
+        except InputRejected as exc:
+            self._finish(request_id, None, Level.ERROR, exc.code, f"input rejected: {exc}",
+                         request_stamp, started)
+            return
+        now = request_stamp if request_stamp is not None else (state.stamp_s if state else None)
+        mass = None if state is None else self.queue.mass_for(state.stamp_s)
+        if state is None or mass is None:
+            self._finish(request_id, None, Level.ERROR, Code.NO_ESTIMATE,
+                         "no valid state_estimate and mass_estimate yet", now, started)
+            return
+        pos, vel, stamp = state.pos_m, state.vel_m_s, state.stamp_s
+        if self.trigger is not None:   # the prediction restarts from the estimate solved from
+            self.trigger.replanned(stamp, pos, vel, mass)
+        started["state_stamp_s"] = f"{stamp:.9f}"
+        for key, sigma in (("state_position_sigma_m", state.pos_sigma_m),
+                           ("state_velocity_sigma_m_s", state.vel_sigma_m_s)):
+            if sigma is not None:   # from the estimate's covariances, where it gave them
+                started[key] = f"{sigma:.6g}"
+        try:
+            out = self.planner.replan(pos, vel, mass, stamp, request_id, now_s=request_stamp)
+        except InputRejected as exc:
+            self._finish(request_id, None, Level.ERROR, exc.code, f"input rejected: {exc}", now,
+                         started)
+            return
+        self.replans += 1
+        if out.ok:
+            why = self._persist()
+            if why:
+                out.level, out.reason = Level.WARN, f"{out.reason}; {why}"
+        self._finish(request_id, out, out.level, out.code, out.reason, stamp, started)
+
+    def _finish(self, request_id, out, level: Level, code: Code, reason: str, stamp,
+                extra=None) -> None:
+        plan = self.planner.plan
+        if plan is not None:
+            self.out.publish_plan(plan, stamp if out is not None and out.ok else None)
+        values = solve_values(request_id, self.planner.method, out, plan,
+                              self.planner.units.lu_km, extra or {})
+        self.out.diag(level, code, reason, values, stamp)
+        self.out.solved(level, reason, out.solve_time_s if out is not None else None)
+        self._release_withheld(plan)
+        self.queue.record(level, reason, bool(out is not None and out.ok))
+
+    def _release_withheld(self, plan: Plan | None) -> None:
+        """The thrust commands withheld for the estimates that triggered this re-plan (or were
+        coalesced into it), from the plan now in force; none while inactive."""
+        with self._withheld_lock:
+            stamps, self._withheld = self._withheld, []
+        if plan is None or not self.active():
+            return
+        for s in stamps:
+            try:
+                est = self.queue.state_for(s)   # the estimate of that stamp (RTN plans turn)
+            except InputRejected:
+                continue
+            self.out.publish_thrust(plan.command_at(s, est.pos_m, est.vel_m_s), s)
+
+    def stop(self) -> None:
+        """Stop the worker (the solve in progress, if any, finishes first)."""
+        self.queue.stop()
+        if self._worker is not None:
+            self._worker.join(timeout=5.0)
+            self._worker = None
+
+
+def solve_values(request_id: str, method: str, out, plan, lu_km: float, extra: dict) -> dict:
+    """The values of a finished re-plan's diagnostic: the request, the solve (``out``: its
+    ``ReplanOutcome``, or None when none ran) and the plan in force."""
+    values = {"request_id": request_id, "method": method,
+              "warm_start": "yes" if out is not None and out.warm_start else "no", **extra}
+    if out is not None:
+        values.update({"solve_time_s": f"{out.solve_time_s:.4f}",
+                       "iterations": str(out.iterations),
+                       "plan_kept": "no" if out.ok else "yes"})
+    if plan is not None:
+        values.update({"max_violation": f"{plan.max_violation:.3e}",
+                       "final_mass_kg": f"{plan.states_si[-1, 6]:.4f}",
+                       "thrust_bound_n": f"{plan.thrust_bound_n:.6g}"})
+        margin = plan.solution.min_path_margin
+        if margin is not None:   # a keep-out scenario: its margin in km
+            values["keep_out_margin_km"] = f"{margin * lu_km:.3f}"
+    return values
