@@ -1,5 +1,6 @@
-"""One ament_python package, daddy_ros, installing both Python packages:
-daddy_core (the solver, no ROS) and daddy_ros (the rclpy guidance node)."""
+"""One ament_python package, daddy_ros, installing three Python packages: daddy_core (the
+solver, no ROS), daddy_ros (the rclpy guidance node) and daddy_sim (its simulator, closed loop,
+campaigns, demo and recorder)."""
 from glob import glob
 
 from setuptools import find_packages, setup
@@ -9,7 +10,8 @@ package_name = "daddy_ros"
 setup(
     name=package_name,
     version="0.1.0",
-    packages=find_packages(include=["daddy_core", "daddy_core.*", "daddy_ros", "daddy_ros.*"]),
+    packages=find_packages(include=["daddy_core", "daddy_core.*", "daddy_ros", "daddy_ros.*",
+                                    "daddy_sim", "daddy_sim.*"]),
     package_data={"daddy_core.catalogue": ["cases/*.json", "run_times.json"],
                   "daddy_ros": ["plans/*.json"]},
     data_files=[
@@ -31,8 +33,8 @@ setup(
         "console_scripts": [
             "daddy = daddy_core.cli:main",
             "guidance_node = daddy_ros.guidance_node:main",
-            "gnc_demo = daddy_ros.demo:main",
-            "daddy_campaign = daddy_ros.campaign_cli:main",
+            "gnc_demo = daddy_sim.demo:main",
+            "daddy_campaign = daddy_sim.campaign_cli:main",
         ],
     },
 )

@@ -21,8 +21,8 @@ from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
-from daddy_ros.campaign_executors import Executor, open_executor  # noqa: E402
-from daddy_ros.campaigns import (CampaignConfig, Dispersion, RunRecord, RunStatus,  # noqa: E402
+from daddy_sim.campaign_executors import Executor, open_executor  # noqa: E402
+from daddy_sim.campaigns import (CampaignConfig, Dispersion, RunRecord, RunStatus,  # noqa: E402
                                  run_campaign)
 
 

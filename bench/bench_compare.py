@@ -88,7 +88,7 @@ import json, os, statistics, sys
 sys.path.insert(0, os.path.join(os.environ["PYTHONPATH"], "bench"))
 import numpy as np
 from bench_replan import PERTURB, perturbed_state
-from daddy_ros.closed_loop import nominal_planner
+from daddy_sim.closed_loop import nominal_planner
 out = {}
 for case in ("earth_mars", "halo_l2_l1"):
     times = []

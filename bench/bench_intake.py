@@ -47,7 +47,7 @@ def main() -> None:
     from bench_da import machine
     from daddy_ros.client import GuidanceClient
     from daddy_ros.guidance_node import GuidanceNode
-    from daddy_ros.sim import TruthSim
+    from daddy_sim.sim import TruthSim
     from daddy_ros.spin import SpinThread
     rclpy.init(signal_handler_options=SignalHandlerOptions.NO)
     wall0 = time.time()

@@ -15,8 +15,8 @@ import time
 import numpy as np
 
 from daddy_ros.config import PLANS_DIR
-from daddy_ros.closed_loop import nominal_planner
-from daddy_ros.sim import T0_S, Errors, TruthSim
+from daddy_sim.closed_loop import nominal_planner
+from daddy_sim.sim import T0_S, Errors, TruthSim
 
 PERTURB = {"earth_mars": (1e6, 1.0), "halo_l2_l1": (1e4, 1e-2)}
 PEER_MS = {"earth_mars": 68.0, "halo_l2_l1": 146.0}   # CasADi + IPOPT warm-started (issue #4)
@@ -89,7 +89,7 @@ def end_to_end(trials: int = 5):
     os.environ["ROS_AUTOMATIC_DISCOVERY_RANGE"] = "LOCALHOST"  # the demo stays on loopback
     import rclpy
 
-    from daddy_ros.demo import RosLink
+    from daddy_sim.demo import RosLink
     from daddy_ros.guidance_node import GuidanceNode
     from daddy_ros.spin import SpinThread
     rclpy.init()

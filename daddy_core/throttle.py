@@ -1,20 +1,17 @@
 """The exact fuel-optimal problem in throttle and direction controls: the end game of a
 fuel-optimal solve (``solver.solve``).
 
-Why: the paper's homotopy (``fuel``) replaces |u| by a pseudo-Huber cost whose curvature sits
-within delta of zero thrust. On a many-revolution transfer, with thousands of switches between
-thrust arcs and coasts, the last step's DDP solves and the KKT polishing crawl at that kink (a
-35-day LEO transfer: unconverged after 30 minutes, 960.22 kg). Written with the thrust as
+Rationale: the paper's homotopy (``fuel``) replaces |u| by a pseudo-Huber cost whose curvature
+sits within delta of zero thrust, where DDP and the KKT polishing crawl at thousands of switches
+(docs/design-notes.md: exact fuel first). Written with the thrust as
 
     u = u_max s d(alpha, beta),   0 <= s <= 1 (the throttle),   |d| = 1,
 
 the propellant is linear in s, the thrust bound a simple bound on s, and every function of the
 problem is smooth: the KKT polishing (``solver.kkt_polish``: SQP on a working set) meets the
-switches as bounds of s entering and leaving its working set, and converges (the same LEO
-transfer: 12 iterations, 60 s, from the energy-optimal solution). It is the formulation of the
+switches as bounds of s entering and leaving its working set. It is the formulation of the
 direct transcription behind the reference oracles (T = T_max s d). Its optimum is the true
-fuel optimum, which the pseudo-Huber one approaches with a little more propellant (Earth-Mars:
-603.4654 kg against 603.5498, the oracle's).
+fuel optimum, which the pseudo-Huber one approaches with a little more propellant.
 
 The direction: d = R (sin beta, cos beta cos alpha, cos beta sin alpha), R a fixed rotation whose
 first column -- the pole, where alpha is undetermined -- is the direction the thrust uses

@@ -1,4 +1,4 @@
-"""Dispersion campaigns (``daddy_ros.campaigns`` and its results file, executors, CLI, plot):
+"""Dispersion campaigns (``daddy_sim.campaigns`` and its results file, executors, CLI, plot):
 config validation naming the field, draws, failures recorded, resume after a kill, merge, the
 summary from a hand-made file, and a campaign on a loopback Dask LocalCluster."""
 import concurrent.futures
@@ -15,15 +15,15 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from daddy_ros import closed_loop
-from daddy_ros.campaign_cli import main as campaign_main
-from daddy_ros.campaign_executors import Executor, open_executor
-from daddy_ros.campaign_results import (Header, ResultsWriter, merge_results, read_results,
+from daddy_sim import closed_loop
+from daddy_sim.campaign_cli import main as campaign_main
+from daddy_sim.campaign_executors import Executor, open_executor
+from daddy_sim.campaign_results import (Header, ResultsWriter, merge_results, read_results,
                                         summarise, wilson_interval)
-from daddy_ros.campaigns import (CampaignConfig, CampaignError, Dispersion, RunRecord,
+from daddy_sim.campaigns import (CampaignConfig, CampaignError, Dispersion, RunRecord,
                                  RunStatus, load_config, run_campaign, run_one)
 from daddy_ros.config import TriggerConfig
-from daddy_ros.sim import T0_S, Errors, TruthSim
+from daddy_sim.sim import T0_S, Errors, TruthSim
 
 # Open loop (no re-plans): a run is a fraction of a second, and flies every dispersion.
 OPEN_LOOP = {"case": "halo_l2_l1", "seeds": {"first": 1, "count": 4},
@@ -196,11 +196,11 @@ def test_summary_from_a_hand_made_results_file(tmp_path):
     assert s.errors == (("ValueError: x", 1),)
     assert wilson_interval(0, 10) == (0.0, pytest.approx(0.2775, abs=1e-4))
     assert wilson_interval(10, 10) == (pytest.approx(0.7225, abs=1e-4), 1.0)
-    out = subprocess.run([sys.executable, "-m", "daddy_ros.campaign_cli", "summary", str(p)],
+    out = subprocess.run([sys.executable, "-m", "daddy_sim.campaign_cli", "summary", str(p)],
                          capture_output=True, text=True, check=True).stdout
     assert "3/5 = 60.0 %" in out.replace("60.0%", "60.0 %") and "23.1%" in out
     assert "failed x1: ValueError: x" in out
-    js = json.loads(subprocess.run([sys.executable, "-m", "daddy_ros.campaign_cli", "summary",
+    js = json.loads(subprocess.run([sys.executable, "-m", "daddy_sim.campaign_cli", "summary",
                                     str(p), "--json"], capture_output=True, text=True,
                                    check=True).stdout)
     assert js["success"] == 3 and js["miss_km"]["max"] == 5.0
@@ -281,7 +281,7 @@ def test_resume_after_the_campaign_is_killed(tmp_path):
     cfg = tmp_path / "c.json"
     cfg.write_text(json.dumps({**OPEN_LOOP, "seeds": {"first": 1, "count": 8}}))
     out = tmp_path / "r.jsonl"
-    cmd = [sys.executable, "-m", "daddy_ros.campaign_cli", "run", str(cfg), "--out", str(out),
+    cmd = [sys.executable, "-m", "daddy_sim.campaign_cli", "run", str(cfg), "--out", str(out),
            "--jobs", "1"]
     proc = subprocess.Popen(cmd, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE,
                             start_new_session=True)
@@ -302,7 +302,7 @@ def test_resume_after_the_campaign_is_killed(tmp_path):
 
 
 def test_gnc_demo_runs_is_a_campaign(tmp_path, capsys):
-    from daddy_ros.demo import main as demo_main
+    from daddy_sim.demo import main as demo_main
     out = tmp_path / "runs.jsonl"
     rc = demo_main(["--runs", "2", "--jobs", "1", "--seed", "5", "--replan-every", "1000",
                     "--final-stages", "0", "--trigger-km", "0", "--trigger-cm-s", "0",

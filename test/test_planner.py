@@ -9,12 +9,12 @@ import pytest
 from daddy_core.errors import DaddyError
 from daddy_ros.checks import InputRejected
 from daddy_ros.config import PLANS_DIR, TriggerConfig
-from daddy_ros.closed_loop import flight_steps
+from daddy_sim.closed_loop import flight_steps
 from daddy_ros.plan import Code
 from daddy_ros.planner import GuidancePlanner
 from daddy_ros.self_trigger import Reason, ReplanTrigger, propagate
 from daddy_ros.shift import ARRIVAL_SPEED_SCALE_M_S, MIN_STAGE_FRACTION, MIN_STAGES_LEFT
-from daddy_ros.sim import T0_S, Errors, TruthSim
+from daddy_sim.sim import T0_S, Errors, TruthSim
 
 
 @pytest.fixture(scope="module")
@@ -367,7 +367,7 @@ def test_a_plan_that_fails_its_repropagation_is_never_adopted(monkeypatch):
 def test_demo_plot_is_a_png_of_flown_and_planned(planner, tmp_path):
     """The demo's figure (matplotlib: the plots extra, installed by make demo / make test)."""
     pytest.importorskip("matplotlib")
-    from daddy_ros.demo import plot_closed_loop
+    from daddy_sim.demo import plot_closed_loop
     plan = planner.plan
     r = {"flown_m": plan.states_si[:, :3] * 1.001,
          "thrust_log": np.column_stack([plan.epoch_s + plan.stage_start_s,

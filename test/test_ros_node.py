@@ -17,7 +17,7 @@ from std_srvs.srv import Trigger  # noqa: E402
 from daddy_ros import conversions as cv  # noqa: E402
 from daddy_ros.client import GuidanceClient  # noqa: E402
 from daddy_ros.guidance_node import GuidanceNode  # noqa: E402
-from daddy_ros.sim import TruthSim  # noqa: E402
+from daddy_sim.sim import TruthSim  # noqa: E402
 
 assert os.environ["ROS_AUTOMATIC_DISCOVERY_RANGE"] == "LOCALHOST"
 FRAME = "sun_ecliptic"
@@ -380,7 +380,7 @@ def test_recording_writes_every_topic_and_a_schedule_round_trips(graph, tmp_path
     from mcap.reader import make_reader
     from mcap_ros2.decoder import DecoderFactory
 
-    from daddy_ros.recording import McapRecorder
+    from daddy_sim.recording import McapRecorder
     node, c = graph
     path = tmp_path / "run.mcap"
     rec = McapRecorder(path, node.interface_topics(), node_name="daddy_test_recorder")

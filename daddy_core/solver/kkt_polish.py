@@ -1,11 +1,9 @@
 """KKT polishing: Newton steps on the first-order optimality conditions of a feasible iterate
 (SQP on a working set), each followed by Newton's feasibility restoration (Alg. 11).
 
-Why: DDP stops on a relative cost decrease below tol_ddp, and on an ill-conditioned problem
-that happens far from a stationary point (``optimality``); tightening tol_ddp after the fact
-does not help much, because the augmented Lagrangian's DDP then minimises f + lam . g with
-multipliers far larger than the cost (lam . g at |g| = tol_aul moves the cost by more than
-the gain sought). Newton on the KKT conditions uses what the solver already has -- order-2
+Rationale: DDP stops on a relative cost decrease below tol_ddp, which on an ill-conditioned
+problem happens far from a stationary point (docs/design-notes.md: KKT polishing). Newton on
+the KKT conditions uses what the solver already has -- order-2
 expansions of the dynamics, costs and constraints, and the least-squares multipliers of
 ``optimality`` -- and converges quadratically near a KKT point.
 

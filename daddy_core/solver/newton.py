@@ -19,8 +19,8 @@ r = log d*_max / log d_max above eps_CV. Sigma is symmetric block-tridiagonal (r
 stage); it is factorised as a banded matrix (LAPACK pbtrf through scipy's cholesky_banded), whose
 cost grows linearly with N -- no dense N_c^3 factorisation.
 
-Two entry points: ``restore`` drives the guess to feasibility before DDP (a warm start's from
-the previous plan's stage maps), ``polish`` finishes a DDP solution (Alg. 11); both run ``newton``.
+One entry point, ``polish``: it drives a guess to feasibility before DDP (a warm start's from
+the previous plan's stage maps) and finishes a DDP solution, the same Alg. 11.
 """
 from __future__ import annotations
 
@@ -270,10 +270,7 @@ def _flat(current: list) -> bool:
     """The exact residual stayed put: within _FLAT_TOL over each of the last _FLAT_ITER outer
     iterations. Such an iterate is where Newton's steps no longer move it (each outer
     iteration's model is solved anew, and a run that converges changes its residual by factors
-    between iterations, after any detour). Measured on the restorations of the paper's guesses:
-    Earth-Mars sat at 35.16 and Lyapunov at 130 from their third iteration to their tenth, where
-    the halving test stopped them; every converging restoration (halo, DRO over one to three
-    revolutions, random DRO guesses) changed its residual by 6 % or more per iteration."""
+    between iterations, after any detour; design notes: flat residual stop)."""
     last = np.asarray(current[-_FLAT_ITER - 1:])
     return (last.size > _FLAT_ITER
             and bool(np.all(np.abs(np.diff(last)) <= _FLAT_TOL * np.abs(last[:-1]))))
@@ -454,13 +451,9 @@ def _corrected(model: ConstraintModel, sigma: BandedSigma, dY: np.ndarray, step:
     on the same factorisation; with the model's residual at dY + the step returned (which
     ``_backtrack`` takes instead of evaluating it again).
 
-    Why: the full step meets the model's linearisation, so its residual d(dY + step) is the
-    model's second-order term alone; where that term dominates -- a weighted minimum-norm step
-    that turns a full-thrust control along its thrust sphere (|u|^2 <= u_max^2 is met to
-    first order and violated by |du|^2) -- the backtracking cut every step to 1/8-1/16 and
-    Newton crept linearly (MEO's fuel-optimal polishing: 8.0e-7 -> 5.3e-7 in 10 iterations,
-    then a stall). The correction, a step on the same Jacobian against that residual, removes
-    the second-order term to first order (Nocedal & Wright, sec. 18.3) and leaves alpha = 1."""
+    Rationale: the full step's residual is the model's second-order term alone, which a step
+    turning a full-thrust control along its thrust sphere makes dominant; the correction removes
+    it to first order (Nocedal & Wright, sec. 18.3; design notes: second-order correction)."""
     ahead = model.residual(dY + step)
     if not float(np.max(np.abs(ahead))) >= dmax:   # (the full step will do; or NaN: as before)
         return step, ahead

@@ -29,7 +29,7 @@ from daddy_ros.request_queue import ESTIMATE_WAIT_S
 
 SCENARIO = "earth_mars"
 FRAME = "sun_ecliptic"
-T0_S = 1000.0   # the mission clock at departure [s] (daddy_ros.sim.T0_S, the demo's)
+T0_S = 1000.0   # the mission clock at departure [s] (daddy_sim.sim.T0_S, the demo's)
 # delivery allowance when judging "newest state at solve start": the node's own allowance for an
 # estimate arriving late (it waits this long for one); on a loaded 2-core machine loopback
 # delivery to a node whose solver thread is busy has been seen to exceed 0.1 s (CI, session 27)
@@ -162,8 +162,8 @@ def _ros_session(fn):
 
 def _nominal():
     """(planner holding the nominal plan at T0, truth sim at T0, thrust bound N)."""
-    from daddy_ros.closed_loop import nominal_planner
-    from daddy_ros.sim import Errors, TruthSim
+    from daddy_sim.closed_loop import nominal_planner
+    from daddy_sim.sim import Errors, TruthSim
     planner, _ = nominal_planner(SCENARIO, 60.0)
     sim = TruthSim(SCENARIO, Errors(0, 0, 0, 0), t0_s=T0_S)
     return planner, sim, planner.case.spacecraft.max_thrust_n
@@ -652,9 +652,9 @@ def process_faults(sizes: Sizes, workdir: Path, progress=None) -> list[Row]:
 
     from daddy_ros import conversions as cv
     from daddy_ros.config import TriggerConfig
-    from daddy_ros.closed_loop import fly
-    from daddy_ros.demo import RosLink
-    from daddy_ros.sim import Errors, TruthSim
+    from daddy_sim.closed_loop import fly
+    from daddy_sim.demo import RosLink
+    from daddy_sim.sim import Errors, TruthSim
 
     planner, _, _ = _nominal()
     row = Row("process: kill -9 and restart")

@@ -10,7 +10,7 @@ import numpy as np
 from daddy_core.catalogue import load_case
 from daddy_core.errors import DaddyError
 
-from .self_trigger import propagate
+from daddy_ros.self_trigger import propagate
 
 T0_S = 1000.0  # the demo's mission clock at departure [s]; any positive epoch works
 

@@ -17,7 +17,7 @@ from pathlib import Path
 
 from daddy_core.errors import DaddyError
 
-from .spin import SpinThread
+from daddy_ros.spin import SpinThread
 
 _PRIMITIVES = {"bool", "byte", "char", "float32", "float64", "int8", "uint8", "int16",
                "uint16", "int32", "uint32", "int64", "uint64", "string", "wstring"}

@@ -10,10 +10,10 @@ import numpy as np
 
 from daddy_core.errors import DaddyError
 
-from .checks import InputRejected
-from .config import TriggerConfig, bundled_plan
-from .planner import GuidancePlanner
-from .self_trigger import Reason, ReplanTrigger
+from daddy_ros.checks import InputRejected
+from daddy_ros.config import TriggerConfig, bundled_plan
+from daddy_ros.planner import GuidancePlanner
+from daddy_ros.self_trigger import Reason, ReplanTrigger
 from .sim import T0_S, TruthSim
 
 

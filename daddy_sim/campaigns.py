@@ -36,7 +36,7 @@ from daddy_core.catalogue import load_case
 from daddy_core.dynamics.units import CARTESIAN_SYSTEMS
 from daddy_core.errors import DaddyError
 
-from .config import TriggerConfig, option
+from daddy_ros.config import TriggerConfig, option
 from .sim import T0_S, Errors, TruthSim
 
 

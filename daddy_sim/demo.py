@@ -26,8 +26,8 @@ from .campaign_executors import Executor
 from .campaign_results import Header, Results, ResultsWriter, format_summary, summarise
 from .campaigns import CampaignConfig, CampaignError, Guidance, Simulation, flight_record
 from .closed_loop import fly, nominal_planner
-from .plan import Level
-from .self_trigger import Reason
+from daddy_ros.plan import Level
+from daddy_ros.self_trigger import Reason
 from .sim import T0_S, TruthSim
 
 
@@ -43,8 +43,8 @@ class RosLink:
     (estimates out; thrust commands, schedules and diagnostics in)."""
 
     def __init__(self, frame_id: str, timeout_s: float):
-        from .client import GuidanceClient
-        from .conversions import stamp_to_s
+        from daddy_ros.client import GuidanceClient
+        from daddy_ros.conversions import stamp_to_s
         self._stamp_s = stamp_to_s
         self.client = GuidanceClient(frame_id, name="daddy_gnc_sim")
         self.node = self.client.node
@@ -112,7 +112,7 @@ class RosLink:
     def _self_replan(self, t_s, after: int):
         """(request id, (level, message, values)) of a self-triggered re-plan that started from
         the estimate at t_s, among the diagnostics from index ``after`` on."""
-        from .client import status_of
+        from daddy_ros.client import status_of
         for _, m in self.client.diags[after:]:
             for st in m.status:
                 level, text, vals = status_of(st)
@@ -221,8 +221,8 @@ def _ros_demo(args, config: CampaignConfig, planner, header: Header) -> int:
     import rclpy
     from rclpy.signals import SignalHandlerOptions
 
-    from .guidance_node import GuidanceNode
-    from .spin import SpinThread
+    from daddy_ros.guidance_node import GuidanceNode
+    from daddy_ros.spin import SpinThread
     rclpy.init(signal_handler_options=SignalHandlerOptions.NO)
     g = config.guidance
     guidance = GuidanceNode(scenario=config.case, time_budget_s=g.time_budget_s,
