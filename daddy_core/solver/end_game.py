@@ -24,7 +24,7 @@ from ..problem import Problem
 from ..throttle import ThrottleForm, has_throttle_form, throttle_form
 from . import newton
 from .context import SolveContext
-from .homotopy import HomotopyResult, continuation, resume
+from .homotopy import HomotopyResult, continuation, joined, resume_duals
 from .kkt_polish import kkt_polish
 from .optimality import Optimality, objective, optimality
 from .start import Start
@@ -210,9 +210,11 @@ def _exact_attempt(stall_option: str) -> Callable[[SolveContext, Game], Game]:
 def _resume(ctx: SolveContext, game: Game) -> Game:
     """The rest of the homotopy from the first step's solution, then Newton's polishing."""
     ctx.say("the rest of the homotopy from the first step's solution")
-    with ctx.clock.phase("ddp"):
-        hres = resume(ctx.problem, game.hres, ctx.steps[1:], ctx.method, ctx.opts, ctx.stats,
-                      ctx.clock.deadline, ctx.progress, ctx.rho0)
+    done, before = game.hres, len(game.hres.history)
+    more = homotopy(ctx, done.X, done.U, ctx.steps[1:], rho=ctx.rho0,
+                    duals=resume_duals(ctx.problem, done, ctx.opts),
+                    numbering=(before, before + len(ctx.steps) - 1))
+    hres = joined(done, more)
     return replace(game, hres=hres, end=polished(ctx, hres, game.start, True))
 
 

@@ -146,21 +146,18 @@ def _next_multipliers(problem: Problem, X, U, mult: Multipliers,
     return mult
 
 
-def resume(problem: Problem, done: HomotopyResult, steps: tuple, method: Method,
-           opts: SolverOptions, stats: DDPStats, deadline: float | None = None, progress=None,
-           rho: float | None = None) -> HomotopyResult:
-    """``continuation`` of the further ``steps`` from the solution of a continuation that ran
-    the steps before them (``done``), as if one continuation had run them all: from its
-    solution with the multipliers of eq. 9's update there; the iterations and the history
-    summed."""
-    mult = _next_multipliers(problem, done.X, done.U, done.mult, opts)
-    before = len(done.history)
-    more = continuation(problem, done.X, done.U, steps, method, opts, stats, deadline, progress,
-                        rho=rho, duals=mult.as_duals(),
-                        numbering=(before, before + len(steps)))
-    converged = done.converged and more.converged
+def resume_duals(problem: Problem, done: HomotopyResult, opts: SolverOptions) -> dict:
+    """The multipliers a continuation of further steps starts from after ``done``: eq. 9's
+    update at its solution (``_next_multipliers``), as if one continuation ran them all."""
+    return _next_multipliers(problem, done.X, done.U, done.mult, opts).as_duals()
+
+
+def joined(done: HomotopyResult, more: HomotopyResult) -> HomotopyResult:
+    """One continuation's result from two that ran one after the other: the later one's end,
+    the iterations and the history summed, converged when both were."""
     return replace(more, gains=more.gains or done.gains,
                    aul_iterations=done.aul_iterations + more.aul_iterations,
-                   history=done.history + more.history, converged=converged,
+                   history=done.history + more.history,
+                   converged=done.converged and more.converged,
                    reason=more.reason if done.converged else done.reason,
                    stalled=done.stalled or more.stalled)
