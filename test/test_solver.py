@@ -785,8 +785,8 @@ def test_each_homotopy_step_starts_from_the_multipliers_estimated_at_the_last_so
     """``continuation`` hands the next homotopy step eq. 9's update at the previous step's
     solution (lam + mu g), not the multipliers its last DDP solve ran with, which lag by
     mu g; the whole halo homotopy then converges at the pseudo-Huber optimum. (The number of
-    AUL solves the last step takes depends on the last bits of the BLAS arithmetic: 3 on an
-    Intel machine, 7 on an AMD one -- not asserted.)"""
+    AUL solves the last step takes depends on the last bits of the BLAS arithmetic: 2 with
+    OpenBLAS's SkylakeX kernels, 7 with its Haswell and Zen ones -- not asserted.)"""
     from daddy_core.solver import homotopy
     from daddy_core.solver.aul import update_multipliers
 
