@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import math
 import time
+from typing import TYPE_CHECKING
 
 import numpy as np
 
@@ -13,12 +14,14 @@ from ..integrators import dop853, dop853_batch
 from ..problem import Problem, largest
 from ..throttle import ThrottleForm
 from .context import SolveContext
-from .end_game import Game
 from .homotopy import HomotopyResult
 from .optimality import Optimality, objective
 from .options import Method, SolverOptions
 from .solution import Solution
 from .stage_maps import StageMaps
+
+if TYPE_CHECKING:   # (the end game builds on this module's duals)
+    from .end_game import Game
 
 
 def _describe(r: dict) -> str:

@@ -23,6 +23,7 @@ import numpy as np
 from ..problem import Problem
 from ..throttle import ThrottleForm, has_throttle_form, throttle_form
 from . import newton
+from .assemble import duals
 from .context import SolveContext
 from .homotopy import HomotopyResult, continuation, joined, resume_duals
 from .kkt_polish import kkt_polish
@@ -236,7 +237,6 @@ def _resolve(ctx: SolveContext, game: Game) -> Game:
 
 
 def _resolve_once(ctx: SolveContext, game: Game) -> Game:
-    from .assemble import duals   # (the multipliers a Solution lends: one definition)
     hres, end, hom = game.hres, game.end, ctx.steps[-1]
     ctx.say(f"KKT polishing stalled at {end.optimality.kkt_residual:.2e}: the last homotopy "
             "step again from the polished iterate with its KKT multipliers")
