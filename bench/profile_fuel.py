@@ -14,6 +14,8 @@ from __future__ import annotations
 
 import argparse
 import json
+import os
+import platform
 import subprocess
 import sys
 
@@ -64,7 +66,7 @@ print(json.dumps({"case": name, "cpu_s": cpu, "converged": sol.converged,
 
 def profile(case: str) -> dict:
     out = subprocess.run([sys.executable, "-c", _PROFILE, case], capture_output=True, text=True,
-                         env={**__import__("os").environ, "OPENBLAS_NUM_THREADS": "1"})
+                         env={**os.environ, "OPENBLAS_NUM_THREADS": "1"})
     if out.returncode != 0:
         raise SystemExit(f"{case}: {out.stderr[-2000:]}")
     return json.loads(out.stdout.strip().splitlines()[-1])
@@ -98,7 +100,6 @@ def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--cases", nargs="*", default=list(CASES))
     args = ap.parse_args()
-    import platform
     print(f"machine: {platform.processor() or platform.machine()}, python "
           f"{platform.python_version()}; one process per case, OPENBLAS_NUM_THREADS=1")
     for case in args.cases:

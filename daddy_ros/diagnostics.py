@@ -1,6 +1,6 @@
 """The node's reports on /diagnostics: one ``DiagnosticStatus`` per event with its result
-``Code`` (``event``) and the periodic health status (``health``), which never repeats the last solve's reason in its message (a
-periodic message must not read as a new event)."""
+``Code`` (``event``) and the periodic health status (``health``), which never repeats the last
+solve's reason in its message (a periodic message must not read as a new event)."""
 from __future__ import annotations
 
 import time

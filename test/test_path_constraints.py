@@ -88,7 +88,8 @@ def test_keep_out_holds_between_the_nodes(free, keep_out_25000):
 def node_wise():
     """One sample per stage (the stage end: the nodes) and no exchange."""
     problem = replace(problem_from_case(HALO, r_min_km=25_000.0), path_samples=1)
-    return problem, solve(problem, options=case_options(HALO, True, end_game=dict(path_exchange_rounds=0)))
+    return problem, solve(problem, options=case_options(
+        HALO, True, end_game=dict(path_exchange_rounds=0)))
 
 
 def test_node_wise_constraint_dips_between_nodes(node_wise):

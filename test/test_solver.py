@@ -608,7 +608,8 @@ def test_trust_region_reaches_the_same_optima_as_the_line_search(stages):
     prob = _landing(stage_dt=np.full(stages, 80.0 / stages),
                     stage_cost=lambda x, u, dt, hom: u[0] * 0.0,
                     g_ineq=lambda x, u, dt: dm.stack([u[0] - 45.0, -u[0]]))
-    runs = [solve(prob, np.full((stages, 1), 16.0), options=SolverOptions(ddp=dict(globalization=g)))
+    runs = [solve(prob, np.full((stages, 1), 16.0),
+                  options=SolverOptions(ddp=dict(globalization=g)))
             for g in ("line_search", "trust_region")]
     # the rocket equation: every thrust history that lands in T ends at the same mass
     closed_form = 10.0 * np.exp(-(30.0 + 1.62 * 80.0) / 3000.0)
@@ -850,9 +851,9 @@ def test_a_newton_run_whose_residual_stays_put_has_stalled():
 
 
 def test_a_feasible_iterate_whose_ddp_solve_ran_into_its_bound_gets_one_more_solve():
-    """``aul_safeguards.ends_feasible``: the augmented Lagrangian stops on a feasible iterate when its DDP
-    solve converged, or when the one before it ran into ddp_max_iter too -- never on the first
-    feasible iterate that DDP's iteration bound cut off."""
+    """``aul_safeguards.ends_feasible``: the augmented Lagrangian stops on a feasible iterate
+    when its DDP solve converged, or when the one before it ran into ddp_max_iter too -- never
+    on the first feasible iterate that DDP's iteration bound cut off."""
     from types import SimpleNamespace
 
     from daddy_core.solver.aul_safeguards import ends_feasible as _ends_feasible
@@ -905,9 +906,10 @@ def test_a_ddp_solve_whose_steps_stay_cut_short_without_progress_has_stalled():
 
 
 def test_a_first_ddp_solve_that_leaves_an_infeasible_start_far_behind_has_diverged():
-    """``aul_safeguards.diverged``: the first solve of an AUL loop diverged when both globalisations were
-    cut off and the max violation grew a hundredfold over an infeasible start's; a feasible
-    (restored) start, a smaller growth, or a solve that converged never count."""
+    """``aul_safeguards.diverged``: the first solve of an AUL loop diverged when both
+    globalisations were cut off and the max violation grew a hundredfold over an infeasible
+    start's; a feasible (restored) start, a smaller growth, or a solve that converged never
+    count."""
     from daddy_core.solver.aul_safeguards import diverged as _diverged
     opts = SolverOptions()
     assert _diverged(358.0, 0.27, True, opts)           # Lyapunov guess 27
@@ -1021,7 +1023,8 @@ def test_a_trust_region_step_that_fails_at_a_few_stages_bounds_those_stages_only
     opts = SolverOptions(ddp=dict(globalization="trust_region"))
     out = G.trust_region_step(st, gains, False, opts, st.cost)
     assert isinstance(out, G.Blame) and set(out.stages) <= set(crossed)
-    assert G.trust_region_step(st, gains, False, opts.with_(ddp=dict(stage_trust=False)), st.cost) is None
+    unblamed = opts.with_(ddp=dict(stage_trust=False))
+    assert G.trust_region_step(st, gains, False, unblamed, st.cost) is None
     ref = solve(prob, st.U)
     for stage_trust in (True, False):
         sol = solve(prob, st.U, options=opts.with_(ddp=dict(stage_trust=stage_trust)))

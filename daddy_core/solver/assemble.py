@@ -1,6 +1,6 @@
-"""The Solution of a solve: figures of merit, the DOP853 re-propagation check (``repropagation_miss``),
-the verdict (feasible to tol_newton and KKT residual to tol_optimality), timings, and what a
-warm start needs (``duals``: the KKT multipliers)."""
+"""The Solution of a solve: figures of merit, the DOP853 re-propagation check
+(``repropagation_miss``), the verdict (feasible to tol_newton and KKT residual to
+tol_optimality), timings, and what a warm start needs (``duals``: the KKT multipliers)."""
 from __future__ import annotations
 
 import math
@@ -41,15 +41,15 @@ def repropagation_miss(problem: Problem, U: np.ndarray, X: np.ndarray | None = N
     rhs calls and usually picks a shorter step); the error control still accepts only steps
     within the tolerances.
 
-    With the trajectory X (N+1, nx) that U was solved on and its stage maps (``StageMaps`` whose
-    radius holds (X, U)), every stage is re-propagated at once from its own start X_k (``dop853_batch``, the
-    same steps as one at a time) and the stage defects d_k = DOP853(X_k, U_k) - X_{k+1} are
-    carried to the end through the maps' state Jacobians: x_N = X_N + e_N, e_{k+1} = Phi_k e_k
-    + d_k, e_0 = x0 - X_0 -- the sequential re-propagation to first order in e, whose neglected
-    second-order terms are below round-off while every |e_k| <= ``_LINEAR_REPROPAGATION`` (else
-    the stages are integrated one after the other from x0). A converged many-revolution
-    solution is re-propagated in milliseconds instead of ~13 Python rhs calls per stage (4960
-    LEO stages: 0.5 s of a warm re-plan)."""
+    With the trajectory X (N+1, nx) that U was solved on and its stage maps (``StageMaps``
+    whose radius holds (X, U)), every stage is re-propagated at once from its own start X_k
+    (``dop853_batch``, the same steps as one at a time) and the stage defects d_k =
+    DOP853(X_k, U_k) - X_{k+1} are carried to the end through the maps' state Jacobians: x_N
+    = X_N + e_N, e_{k+1} = Phi_k e_k + d_k, e_0 = x0 - X_0 -- the sequential re-propagation
+    to first order in e, whose neglected second-order terms are below round-off while every
+    |e_k| <= ``_LINEAR_REPROPAGATION`` (else the stages are integrated one after the other
+    from x0). A converged many-revolution solution is re-propagated in milliseconds instead
+    of ~13 Python rhs calls per stage (4960 LEO stages: 0.5 s of a warm re-plan)."""
     if problem.rhs is None:
         x = problem.rollout(U)[-1]
     else:

@@ -37,7 +37,8 @@ def update_multipliers(mult: Multipliers, g, gt, opts: SolverOptions) -> Multipl
         lam_t = lam_t + mult.mu_t * gt
         lam_t[:mult.n_tineq] = np.maximum(lam_t[:mult.n_tineq], 0.0)
     clip = opts.aul.lambda_max
-    return Multipliers(np.clip(lam, -clip, clip), np.minimum(mult.mu * opts.aul.mu_growth, opts.aul.mu_max),
+    return Multipliers(np.clip(lam, -clip, clip),
+                       np.minimum(mult.mu * opts.aul.mu_growth, opts.aul.mu_max),
                        np.clip(lam_t, -clip, clip),
                        np.minimum(mult.mu_t * opts.aul.mu_growth, opts.aul.mu_max),
                        mult.n_ineq, mult.n_tineq)

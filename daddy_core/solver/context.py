@@ -71,10 +71,6 @@ class SolveContext:
     progress: Callable[[str], None] | None = None
     rho0: float | None = None
 
-    @property
-    def fuel_optimal(self) -> bool:
-        return len(self.steps) > 1 or self.steps[0][0] > 0
-
     def say(self, line: str) -> None:
         if self.progress is not None:
             self.progress(line)

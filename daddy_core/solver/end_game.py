@@ -104,7 +104,7 @@ def opening(ctx: SolveContext, start: Start, duals: dict | None) -> Game:
     steps = ctx.steps[:1] if exact_wanted(ctx) else ctx.steps
     hres = homotopy(ctx, start.X, start.U, steps, rho=ctx.rho0, duals=duals, F=start.F,
                     numbering=(0, len(ctx.steps)))
-    return Game(hres, start, polished(ctx, hres, start, ctx.polish))
+    return Game(hres, start, polished(ctx, hres, start))
 
 
 def play(ctx: SolveContext, game: Game) -> Game:
@@ -117,9 +117,10 @@ def play(ctx: SolveContext, game: Game) -> Game:
     return game
 
 
-def polished(ctx: SolveContext, hres: HomotopyResult, start: Start, polish: bool) -> End:
+def polished(ctx: SolveContext, hres: HomotopyResult, start: Start) -> End:
     """The homotopy's last finite iterate -- or the restored start when the homotopy failed
-    after a restoration -- after Newton's polishing (Alg. 11), with its KKT residual."""
+    after a restoration -- after Newton's polishing (Alg. 11, when ``ctx.polish``), with its
+    KKT residual."""
     X, U, st = hres.X, hres.U, hres.stages
     maps = start.restored.maps if start.restored is not None else None
     if np.array_equal(st.X, X):
@@ -129,7 +130,7 @@ def polished(ctx: SolveContext, hres: HomotopyResult, start: Start, polish: bool
     if fallback:   # DDP did not finish: return the feasible, Newton-restored start
         end.X, end.U = start.restored.X, start.restored.U
         end.reason += "; returned the Newton-restored start"
-    if polish and not fallback and not hres.diverged:
+    if ctx.polish and not fallback and not hres.diverged:
         _newton_polish(ctx, end, hres)
     elif hres.stalled and end.converged:   # nothing else can meet the constraints
         end.converged, end.reason = False, hres.stalled
@@ -164,10 +165,15 @@ def _kkt(ctx: SolveContext, end: End, hom: tuple) -> End:
     ctx.say(f"KKT polishing: {res.iterations} iterations, KKT residual {opt.kkt_residual:.2e} "
             f"-> {res.optimality.kkt_residual:.2e} ({res.reason})")
     end.X, end.U, end.optimality, end.maps = res.X, res.U, res.optimality, res.maps or end.maps
-    ctx.work.newton += res.newton_iterations
-    ctx.work.kkt += res.iterations
+    _count(ctx, res)
     end.kkt_reason = res.reason
     return end
+
+
+def _count(ctx: SolveContext, res) -> None:
+    """A KKT polishing's work (``KKTResult``): its iterations and its restorations' Newton."""
+    ctx.work.newton += res.newton_iterations
+    ctx.work.kkt += res.iterations
 
 
 def _exact_fuel(ctx: SolveContext, end: End, stall_iter: int) -> End | None:
@@ -185,8 +191,7 @@ def _exact_fuel(ctx: SolveContext, end: End, stall_iter: int) -> End | None:
         res = kkt_polish(fuel, end.X, V, EXACT,
                          opts.with_(kkt=dict(max_iter=opts.end_game.exact_fuel_max_iter)),
                          opt, ctx.clock.deadline, stall_iter)
-        ctx.work.newton += res.newton_iterations
-        ctx.work.kkt += res.iterations
+        _count(ctx, res)
         ctx.say(f"exact fuel (throttle and direction): {res.iterations} KKT iterations, "
                 f"residual {opt.kkt_residual:.2e} -> {res.optimality.kkt_residual:.2e} "
                 f"({res.reason})")
@@ -216,7 +221,7 @@ def _resume(ctx: SolveContext, game: Game) -> Game:
                     duals=resume_duals(ctx.problem, done, ctx.opts),
                     numbering=(before, before + len(ctx.steps) - 1))
     hres = joined(done, more)
-    return replace(game, hres=hres, end=polished(ctx, hres, game.start, True))
+    return replace(game, hres=hres, end=polished(ctx, hres, game.start))
 
 
 def _pseudo_huber_kkt(ctx: SolveContext, game: Game) -> Game:
@@ -242,7 +247,7 @@ def _resolve_once(ctx: SolveContext, game: Game) -> Game:
             "step again from the polished iterate with its KKT multipliers")
     again = homotopy(ctx, end.X, end.U, (hom,),
                      duals=duals(ctx.problem, end.X, end.U, end.optimality, hres, ctx.opts))
-    new = polished(ctx, again, Start(end.X, end.U), True)
+    new = polished(ctx, again, Start(end.X, end.U))
     if _polishable(new, ctx):
         new = _kkt(ctx, new, hom)
     counted = dict(aul_iterations=hres.aul_iterations + again.aul_iterations,
@@ -277,7 +282,7 @@ def _more_steps(ctx: SolveContext, game: Game) -> bool:
 
 EXACT_FROM_ENERGY_STEP = Attempt(
     "exact fuel from the energy step",
-    lambda ctx, game: len(ctx.steps) > 1 and game.end.converged,
+    lambda ctx, game: _more_steps(ctx, game) and _converged(ctx, game),
     _exact_attempt("exact_fuel_stall_iter"))
 RESUME_HOMOTOPY = Attempt("the rest of the homotopy", _more_steps, _resume)
 EXACT_FROM_HOMOTOPY_END = Attempt("exact fuel from the homotopy's end", _converged,

@@ -97,7 +97,7 @@ class DDPOptions(_Group):
     tol: float = 1e-4                 # relative cost decrease that stops a solve (>= min_iter)
     min_iter: int = 3                 # iterations before the tol test applies
     max_iter: int = 200               # iteration bound of one solve
-    stall_iter: int = 20              # steps in a row below stall_alpha without progress: stalled (0: off)
+    stall_iter: int = 20              # short steps without progress in a row: stalled (0: off)
     stall_alpha: float = 1e-3         # the step fraction below which a step counts as cut short
     rho_init: float = 0.0             # Q_uu regularisation at the start of a solve
     rho_min: float = 1e-8             # smallest non-zero rho
@@ -112,7 +112,7 @@ class DDPOptions(_Group):
     globalization: Globalization = Globalization.LINE_SEARCH   # line search or trust region
     stage_trust: bool = True          # bound the few stages a failed step is blamed on
     tr_ratio_tol: float = 0.1         # trust region: accepted when |actual / expected - 1| <= this
-    tr_kappa: float = 0.25            # trust region: radius grows by 1 + kappa, shrinks by 1 - kappa
+    tr_kappa: float = 0.25            # trust region: radius times 1 + kappa, or 1 - kappa
     carry_rho: bool = False           # each solve of an AUL loop resumes from the last one's rho
 
     def __post_init__(self):
@@ -137,7 +137,7 @@ class AULOptions(_Group):
     mu_init: float = 1.0              # penalty at the start of each homotopy step
     mu_max: float = 1e8               # penalty cap
     mu_growth: float = 10.0           # penalty growth per outer iteration
-    stall_iter: int = 3               # solves at mu_max without halving the violation: stalled (0: off)
+    stall_iter: int = 3               # solves at mu_max, violation not halved: stalled (0: off)
     tr_fallback: bool = True          # a line-search solve cut off is retried with the trust region
 
     def __post_init__(self):
@@ -154,11 +154,11 @@ class NewtonOptions(_Group):
     inner_max_iter: int = 20          # inner iterations on one polynomial model
     ls_shrink: float = 0.5            # backtracking factor of an inner step
     ls_max_halvings: int = 25         # backtracks of an inner step
-    stall_iter: int = 10              # outer iterations without halving the residual: stalled (0: off)
+    stall_iter: int = 10              # outer iterations, residual not halved: stalled (0: off)
     cv_ratio: float = 1.1             # convergence-rate threshold (eps_CV, Alg. 5)
     active_tol: float = 1e-6          # an inequality with g > -active_tol is active
     regularisation: float = 1e-12     # diagonal added to Delta Delta^T if not positive definite
-    control_weight_floor: float = 1e-2    # steps weigh controls by max(|u|/u_max, floor)^2 (0: plain)
+    control_weight_floor: float = 1e-2    # control weights max(|u|/u_max, floor)^2 (0: plain)
     map_reach: float = 10.0           # stage maps are re-centred up to this many radii
     polish_from_ddp_maps: bool = False    # polish from DDP's last maps instead of fresh expansions
 
@@ -185,9 +185,9 @@ class StartOptions(_Group):
 class KKTOptions(_Group):
     """First-order optimality (``optimality``) and the KKT polishing (``kkt_polish``)."""
 
-    tol: float = 1e-4                 # KKT residual a polished solve must reach (inf: not evaluated)
+    tol: float = 1e-4                 # KKT residual a polished solve reaches (inf: not evaluated)
     max_iter: int = 30                # KKT polishing iterations
-    cost_slack: float = 5.0           # a step missing its cost model by this many predictions is refused
+    cost_slack: float = 5.0           # refuse a step missing its cost model by this many
     trial_violation: float = 100.0    # a step violating by this many times its size is refused
     chord_iter: int = 6               # chord iterations of a step's restoration
     restore_iter: int = 4             # Newton iterations of a step's restoration
@@ -247,7 +247,8 @@ MOVED = {
                                               "ls_max_halvings", "stall_iter", "cv_ratio",
                                               "active_tol", "regularisation",
                                               "control_weight_floor")},
-    "map_reach": ("newton", "map_reach"), "polish_from_ddp_maps": ("newton", "polish_from_ddp_maps"),
+    "map_reach": ("newton", "map_reach"),
+    "polish_from_ddp_maps": ("newton", "polish_from_ddp_maps"),
     "restore_start": ("start", "restore"),
     "tol_optimality": ("kkt", "tol"),
     **{f"kkt_{k}": ("kkt", k) for k in ("max_iter", "cost_slack", "trial_violation",
@@ -357,10 +358,6 @@ def _unknown(name: str) -> str:
     return f"options.{name} is not an option group (groups: {', '.join(GROUPS)}, homotopy)"
 
 
-# a case file's per-case solver settings (``catalogue.cases.SOLVER_KEYS``) and where they go
-_CASE_SETTINGS = ("tol_ddp", "tol_aul", "tol_newton", "rho_max")
-
-
 def case_options(case, fuel_optimal: bool, **changes) -> SolverOptions:
     """The paper's solver settings for a catalogue case (its ``solver`` section), with
     ``changes`` as ``SolverOptions.with_`` takes them."""
@@ -368,10 +365,10 @@ def case_options(case, fuel_optimal: bool, **changes) -> SolverOptions:
     hom = s.get("homotopy", {"h": [0.0], "delta": [1e-2]})
     pairs = tuple(zip(hom["h"], hom["delta"])) if fuel_optimal else ((0.0, hom["delta"][0]),)
     groups: dict = {}
-    for key in _CASE_SETTINGS:
-        if key in s:
+    for key, value in s.items():   # (the flat per-case tolerances; homotopy and guess aside)
+        if key in MOVED:
             group, field = MOVED[key]
-            groups.setdefault(group, {})[field] = s[key]
+            groups.setdefault(group, {})[field] = value
     return SolverOptions(homotopy=pairs, **groups).with_(**changes)
 
 

@@ -40,8 +40,9 @@ def _last_step(problem: Problem, sol: Solution, opts: SolverOptions) -> tuple:
 
 def hold(problem: Problem, sol: Solution, resolve, opts: SolverOptions, progress) -> Solution:
     """``sol`` of ``problem`` with g_path held between the nodes: up to
-    ``opts.end_game.path_exchange_rounds`` rounds of (dense check, tighten the offending stages' samples,
-    ``resolve(problem, warm start, options)`` the last homotopy step from ``sol``). Returns the
+    ``opts.end_game.path_exchange_rounds`` rounds of (dense check, tighten the offending
+    stages' samples, ``resolve(problem, warm start, options)`` the last homotopy step from
+    ``sol``). Returns the
     last solve's Solution with ``min_path_margin`` (the dense check's) and every round's work
     counted; ``converged`` is False, and the reason names the stage, when the constraint is
     still violated between the nodes by more than tol_newton."""

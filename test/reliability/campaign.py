@@ -821,8 +821,8 @@ def core_api(sizes: Sizes, workdir: Path) -> list[Row]:
                                                           else [])))
         if group == "homotopy":
             v = draw(st.sampled_from([(), ((2.0, 1e-2),), ((0.0, -1.0),), ((0.5,),)]))
-            return kind, lambda: solve(good, np.zeros((N, nu)), options=SolverOptions(homotopy=v)), \
-                "homotopy"
+            return kind, lambda: solve(good, np.zeros((N, nu)),
+                                       options=SolverOptions(homotopy=v)), "homotopy"
         return kind, lambda: solve(good, np.zeros((N, nu)),
                                    options=SolverOptions(**{group: {field: v}})), \
             f"{group}.{field}"
