@@ -133,9 +133,9 @@ class GuidancePlanner:
         warm = shifted.start is not None
         start = shifted.start or WarmStart(self.case.cold_guess(shifted.problem.N))
         opts = self.policy.options(warm, arrival=shifted.problem.N <= MIN_STAGES_LEFT)
-        # the current plan may already fly above the derating: start from the lowest rating it
-        # keeps to instead of failing on the bounds below first
-        rung = self._rung_for(start.U) if warm else 0
+        # the current plan may already fly above the derating: start from the rung it was
+        # solved on, or the lowest rating it keeps to, instead of failing on the bounds below
+        rung = self._start_rung(self.plan, start.U) if warm else 0
         problem = self._rated(shifted.problem, rung)
         t0 = time.perf_counter()
         deadline = t0 + self.time_budget_s   # one budget for the whole re-plan, ladder included
@@ -242,6 +242,17 @@ class GuidancePlanner:
         """Terminal constraints met to the solver's final tolerance (with slack)."""
         cold = self.policy.cold
         return max(1e-8, 10 * cold.newton.tol) if self.config.polish else 10 * cold.aul.tol
+
+    def _start_rung(self, plan: Plan, U: np.ndarray) -> int:
+        """Where a warm re-plan of ``plan`` (its controls U for the remaining stages) climbs
+        the margin ladder from: the rung the plan was solved on, or the lowest rung U keeps
+        to if higher. Rationale: an exact fuel plan solved on rung r + 1 can fit rung r's
+        bound (its arcs held at rung r's thrust, ``exact_start``) though rung r could not meet
+        the target; re-planning from rung r again failed at every re-plan of the last days of
+        a halo flight (350-850 ms each; design notes: sticky margin rung)."""
+        solved_on = sum(1 for p in self.rated_problems[1:]
+                        if self.units.thrust_n(p.u_max) <= plan.thrust_bound_n * (1 + 1e-9))
+        return max(solved_on, self._rung_for(U))
 
     def _rung_for(self, U: np.ndarray) -> int:
         """The lowest rung of the margin ladder whose bound the controls U (K, 3) keep to."""

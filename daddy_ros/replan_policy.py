@@ -81,7 +81,7 @@ class ReplanPolicy:
                                           else cold.aul.tol)
         warm = SolverOptions.warm_replan(cold, warm_tol_aul, WARM_ACTIVE_TOL,
                                          bool(config.restore_first))
-        arrival = warm.with_(aul=dict(tol=cold.aul.tol),
+        arrival = warm.with_(aul=dict(tol=cold.aul.tol), end_game=dict(exact_start=False),
                              newton=dict(polish_from_ddp_maps=False,
                                          active_tol=cold.newton.active_tol))
         return cls(cold, warm, arrival)

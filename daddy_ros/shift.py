@@ -69,7 +69,9 @@ def shift_plan(base: Problem, plan: Plan | None, t_s: float, x_cart: np.ndarray,
     lam = lam[:, k0:] if lam.ndim == 2 and lam.shape[1] == len(plan.stage_dt_s) else None
     nominal = float(np.median(lengths))
     maps = plan.solution.stage_maps
+    nodes = plan.solution.X[k0:].copy()   # the plan's states at the remaining stage ends
     if first < MIN_STAGE_FRACTION * nominal and len(dts) > 1:
+        nodes = nodes[1:]
         dts = dts[1:]
         dts[0] += first
         U = U[1:]
@@ -88,13 +90,15 @@ def shift_plan(base: Problem, plan: Plan | None, t_s: float, x_cart: np.ndarray,
         idx = np.minimum(np.searchsorted(np.cumsum(dts), mids), len(dts) - 1)
         dts = np.full(MIN_STAGES_LEFT, total / MIN_STAGES_LEFT)
         U = U[idx]
-        maps = None
+        maps = nodes = None
         lam = None if lam is None else lam[:, idx]
     duals = None if lam is None else {"lam": lam, "lam_t": plan.solution.duals.get("lam_t", [])}
     problem = base.with_x0(x0, *grid.problem_grid(dts, s0))
     if arrival:
         problem = arrival_constraints(problem, arrival_tolerance_m, units)
-    return Shifted(problem, WarmStart(U, duals, plan.solution.rho, maps), arrival)
+    if nodes is not None:
+        nodes[0] = problem.x0
+    return Shifted(problem, WarmStart(U, duals, plan.solution.rho, maps, nodes), arrival)
 
 
 def arrival_constraints(problem: Problem, tolerance_m: float, units: Units) -> Problem:

@@ -186,6 +186,34 @@ def test_replan_gives_up_the_thrust_margin_only_as_far_as_needed():
     assert ratings[0] * 1.001 < new_peak <= ratings[1] * 1.001
 
 
+def test_a_plan_solved_on_a_higher_rung_re_plans_from_that_rung(monkeypatch):
+    """A plan solved on rung 1 re-plans from rung 1 even where its thrust fits rung 0
+    (``GuidancePlanner._start_rung``: rung 0 had failed for a state next to it); a plan solved
+    on rung 0 from rung 0."""
+    import dataclasses
+
+    import daddy_ros.planner as planner_mod
+    pl = GuidancePlanner("earth_mars")
+    plan = pl.load_plan(PLANS_DIR / "earth_mars_fuel.json", T0_S)   # fits rung 0
+    bounds, real_solve = [], planner_mod.solve
+
+    def recording_solve(problem, *args, **kw):
+        bounds.append(problem.u_max)
+        return real_solve(problem, *args, **kw)
+
+    monkeypatch.setattr(planner_mod, "solve", recording_solve)
+    k = 5
+    t = plan.epoch_s + np.sum(plan.stage_dt_s[:k])
+    s = plan.states_si[k]
+    for rung in (0, 1):
+        pl.set_plan(dataclasses.replace(plan, thrust_bound_n=float(
+            pl.units.thrust_n(pl.rated_problems[rung].u_max))))
+        bounds.clear()
+        out = pl.replan(s[:3] + 1e3, s[3:6], s[6], t, f"r{rung}", now_s=t)
+        assert out.ok, out.reason
+        assert bounds[0] == pl.rated_problems[rung].u_max
+
+
 def test_one_budget_for_the_whole_replan_ladder_included(monkeypatch):
     """The margin ladder's rungs solve in what is left of the re-plan's budget, and are not
     tried once it is spent: a re-plan answers within its budget (an outage campaign had
@@ -398,15 +426,23 @@ def test_config_yaml_lists_every_node_parameter_with_its_default():
     assert pl.time_budget_s == declared["time_budget_s"]
 
 
-def test_warm_replans_optimise_the_cost_their_loaded_plan_was_solved_for():
-    """A loaded fuel-optimal plan sets the warm (and arrival) re-plans' homotopy step to its own
-    last one; the cold solve keeps the case's whole homotopy."""
+def test_warm_replans_optimise_the_cost_their_loaded_plan_was_solved_for(tmp_path):
+    """A loaded plan whose last homotopy step was a pseudo-Huber one sets the warm (and
+    arrival) re-plans' step to it; a plan whose exact end game ran from the energy step (the
+    bundled halo nominal) leaves the case's last step; the cold solve keeps the case's whole
+    homotopy."""
     pl = GuidancePlanner("halo_l2_l1")
     case_last = pl.policy.cold.homotopy[-1]
     plan_file = PLANS_DIR / "halo_l2_l1_fuel.json"
-    last = json.loads(plan_file.read_text())["history"][-1]
+    data = json.loads(plan_file.read_text())
+    assert data["history"][-1]["h"] == 0.0        # exact from the energy step
     pl.load_plan(plan_file, T0_S)
-    assert pl.policy.warm.homotopy == pl.policy.arrival.homotopy == ((last["h"], last["delta"]),)
+    assert pl.policy.warm.homotopy == pl.policy.arrival.homotopy == (case_last,)
+    data["history"].append(dict(data["history"][-1], h=0.5, delta=0.1))
+    smooth = tmp_path / "pseudo_huber.json"
+    smooth.write_text(json.dumps(data))
+    pl.load_plan(smooth, T0_S)
+    assert pl.policy.warm.homotopy == pl.policy.arrival.homotopy == ((0.5, 0.1),)
     assert pl.policy.cold.homotopy[-1] == case_last
 
 

@@ -53,11 +53,12 @@ class End:
 
 @dataclass
 class Game:
-    """The state of the end game: the homotopy run so far, its start, the current end, and
-    whether an attempt ended the game."""
+    """The state of the end game: the homotopy run so far, its start (None: an exact warm
+    start, ``exact_start``, ran no continuation), the current end, and whether an attempt
+    ended the game."""
 
     hres: HomotopyResult
-    start: Start
+    start: Start | None
     end: End
     final: bool = False
 
@@ -108,7 +109,9 @@ def opening(ctx: SolveContext, start: Start, duals: dict | None) -> Game:
 
 
 def play(ctx: SolveContext, game: Game) -> Game:
-    """Run the end game's attempts in order until one ends it."""
+    """Run the end game's attempts in order until one ends it (none after a final opening)."""
+    if game.final:
+        return game
     for attempt in (EXACT_END_GAME if exact_wanted(ctx) else PSEUDO_HUBER_END_GAME):
         if attempt.applies(ctx, game):
             game = attempt.run(ctx, game)

@@ -27,7 +27,8 @@ class HomotopyResult:
 
     Attributes:
         X: (N+1, nx), U: (N, nu): the last iterate whose states and controls are all finite.
-        stages: the last AUL solve's expanded nominal (its maps serve warm starts).
+        stages: the last AUL solve's expanded nominal (its maps serve warm starts); None when
+            no continuation ran (``exact_start``).
         mult: the multipliers at the end; gains: the last backward sweep's (or None).
         rho: Quu regularisation at the end of the last DDP solve.
         aul_iterations: summed over the steps; history: one summary dict per step.
@@ -41,7 +42,7 @@ class HomotopyResult:
 
     X: np.ndarray
     U: np.ndarray
-    stages: Stages
+    stages: Stages | None
     mult: Multipliers
     gains: Gains | None
     rho: float

@@ -205,11 +205,14 @@ class EndGameOptions(_Group):
     exact_fuel_max_iter: int = 100    # KKT iterations of an exact fuel attempt
     exact_fuel_stall_iter: int = 50   # the attempt from the energy step stops unhalved after these
     exact_fuel_end_stall_iter: int = 10   # the attempt from the homotopy's end likewise
+    exact_start: bool = False         # a warm fuel solve starts in the exact form (exact_start)
+    exact_start_iter: int = 6         # Newton iterations of its restoration (more: no fit)
     resolves: int = 1                 # re-solves of the last step after a stalled KKT polishing
     path_exchange_rounds: int = 4     # exchange rounds of g_path between the nodes (0: none)
 
     def __post_init__(self):
         _check(self, "end_game")
+        _positive(self, "end_game", "exact_start_iter")
 
 
 @dataclass(frozen=True)
@@ -334,14 +337,16 @@ class SolverOptions:
         """The guidance node's warm re-plan from its last plan (``daddy_ros.replan_policy``:
         why each setting): the last homotopy step only, one DDP iteration may stop it, the
         penalty started high and rho carried, no stall rules, no KKT residual, the polishing
-        from DDP's maps with a wider active set, no per-stage trust region."""
+        from DDP's maps with a wider active set, no per-stage trust region; a fuel-optimal
+        plan restored in the exact fuel form first (``end_game.exact_start``)."""
         return cold.with_(
             homotopy=cold.homotopy[-1:],
             ddp=dict(min_iter=1, short_step=0.5, carry_rho=True, stage_trust=False),
             aul=dict(tol=tol_aul, mu_init=WARM_MU_INIT, stall_iter=0),
             newton=dict(stall_iter=0, polish_from_ddp_maps=True,
                         active_tol=max(active_tol, cold.newton.active_tol)),
-            kkt=dict(tol=math.inf), start=dict(restore=bool(restore_first)))
+            kkt=dict(tol=math.inf), start=dict(restore=bool(restore_first)),
+            end_game=dict(exact_start=True))
 
 
 # a warm re-plan's starting penalty: three growth steps below the cap, where a plan's

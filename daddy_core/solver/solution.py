@@ -198,12 +198,16 @@ class WarmStart:
         maps: stage maps of a nearby trajectory with the problem's stages: the initial rollout
             evaluates them where a stage lies inside their radius (Alg. 8) and the Newton
             restoration re-centres them instead of expanding.
+        X: (N+1, nx) states of a nearby trajectory at the problem's stage ends (row 0 is
+            replaced by the problem's x0): where the exact warm start's Newton restoration
+            starts instead of a rollout (``exact_start``; its residuals are exact).
     """
 
     U: np.ndarray | None = None
     duals: dict | None = None
     rho: float | None = None
     maps: StageMaps | None = None
+    X: np.ndarray | None = None
 
     @classmethod
     def of(cls, guess, stage_dt: np.ndarray, carry_rho: bool, t_start: float = 0.0) -> "WarmStart":
@@ -215,5 +219,6 @@ class WarmStart:
         if isinstance(guess, Solution):
             same = np.array_equal(guess.stage_dt, stage_dt) and guess.t_start == t_start
             maps = guess.stage_maps if same else None
-            return cls(guess.U, guess.duals, guess.rho if carry_rho else None, maps)
+            return cls(guess.U, guess.duals, guess.rho if carry_rho else None, maps,
+                       guess.X if same else None)
         return cls(guess)

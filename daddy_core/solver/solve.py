@@ -1,6 +1,7 @@
 """DADDy (paper Fig. 1) as the pipeline it is:
 
-    context -> start (Alg. 11 restoration and its fallbacks)        solver/context.py, start.py
+    context -> exact warm start (a bang-bang plan restored in its form) exact_start.py
+            -> start (Alg. 11 restoration and its fallbacks)        solver/context.py, start.py
             -> continuation (eq. 12-14 -> Alg. 4 -> Alg. 3)           homotopy.py, aul.py, ddp.py
             -> end game (Newton / KKT polishing, exact fuel, re-solve) end_game.py
             -> assemble (re-propagation check, verdict, duals)         assemble.py
@@ -17,6 +18,7 @@ from ..problem import Problem
 from . import end_game, path_exchange
 from .assemble import repropagation_miss, solution, unsolved
 from .context import Clock, SolveContext
+from .exact_start import exact_opening, exact_start_wanted
 from .homotopy import homotopy_steps
 from .options import Method, SolverOptions
 from .solution import Solution, WarmStart
@@ -58,7 +60,9 @@ def solve(problem: Problem, u_guess=None, method: Method | str = Method.DYN,
         why = None if p.g_path is None else violated_at_start(p, U0[0], o.newton.tol)
         if why is not None:
             return unsolved(p, U0, why, ctx.steps, method, case_name)
-        game = end_game.opening(ctx, start(ctx, U0, warm), warm.duals)
+        game = exact_opening(ctx, U0, warm) if exact_start_wanted(ctx) else None
+        if game is None:
+            game = end_game.opening(ctx, start(ctx, U0, warm), warm.duals)
         return solution(ctx, end_game.play(ctx, game), case_name)
 
     sol = once(problem, u_guess, fuel_optimal, opts)
