@@ -124,16 +124,22 @@ def test_solution_round_trips_and_warm_starts(tmp_path):
     assert warm.cost == pytest.approx(sol.cost, rel=1e-9)
 
 
+# the node's Earth-Mars nominal before its plans were solved in the exact fuel form: the last
+# pseudo-Huber step's optimum at the derated bound (599.25 kg), thrust at every stage (none at
+# zero): what the tests of stage maps and Newton steps below need (a coasting stage's map at
+# zero thrust has a tiny radius)
+SMOOTH_PLAN = pathlib.Path(__file__).parent / "data" / "earth_mars_pseudo_huber_plan.json"
+
+
 def test_stage_maps_roll_out_and_restore_like_integration():
-    # the Earth-Mars nominal plan's stage maps: a Dyn rollout (polynomials inside their radius)
+    # a smooth Earth-Mars plan's stage maps: a Dyn rollout (polynomials inside their radius)
     # follows the integrated one, and a Newton restoration from a perturbed start that
     # re-centres them ends as feasible as one that expands afresh
     from daddy_core.solver.stage_maps import StageMaps, expand_dynamics
     from daddy_core.solver.newton import polish
     case = load_case("earth_mars")
     prob = problem_from_case(case)
-    plans = pathlib.Path(__file__).parents[1] / "daddy_ros" / "plans"
-    plan = Solution.from_json(plans / "earth_mars_fuel.json")
+    plan = Solution.from_json(SMOOTH_PLAN)
     opts = case_options(case, True)
     maps = StageMaps.of(expand_dynamics(prob, plan.X[:-1], plan.U), plan.X, plan.U,
                         opts.eps_da)
@@ -163,13 +169,12 @@ def test_stage_maps_roll_out_and_restore_like_integration():
 
 
 def _earth_mars_plan_moved(dr_m: float, dv_m_s: float):
-    """The node's bundled Earth-Mars fuel-optimal plan (a Solution), and its problem started
+    """A smooth Earth-Mars fuel-optimal plan (``SMOOTH_PLAN``), and its problem started
     dr_m metres / dv_m_s m/s off the plan's first state (directions (0.6, -0.8, 0) and
     (0.6, 0.8, 0)) with the plan's controls rolled out from there: (plan, problem, X0, opts)."""
     case = load_case("earth_mars")
     prob = problem_from_case(case)
-    plan = Solution.from_json(pathlib.Path(__file__).parents[1] / "daddy_ros" / "plans"
-                              / "earth_mars_fuel.json")
+    plan = Solution.from_json(SMOOTH_PLAN)
     u = case.units
     moved = prob.with_x0(plan.X[0] + np.r_[u.length([0.6 * dr_m, -0.8 * dr_m, 0.0]),
                                            u.speed([0.6 * dv_m_s, 0.8 * dv_m_s, 0.0]), 0.0])

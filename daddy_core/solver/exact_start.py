@@ -57,7 +57,8 @@ def exact_opening(ctx: SolveContext, U0: np.ndarray, warm: WarmStart) -> Game | 
         return None
     with ctx.clock.phase("restore"):
         res = newton.polish(fuel, X, V, opts.with_(
-            newton=dict(max_iter=opts.end_game.exact_start_iter)), ctx.clock.deadline)
+            newton=dict(max_iter=min(opts.newton.max_iter, opts.end_game.exact_start_iter))),
+            ctx.clock.deadline)
     ctx.work.restore += res.iterations
     ctx.say(f"exact warm start: Newton in the exact fuel form, {res.iterations} iterations, "
             f"max violation {res.max_violation:.2e} ({res.reason})")

@@ -586,7 +586,8 @@ def solver_faults(sizes: Sizes, workdir: Path) -> list[Row]:
             raise RuntimeError("no OK answer before injecting faults")
         faults = {
             "no convergence": lambda: setattr(pl, "policy", policy.with_warm(
-                ddp=dict(max_iter=1), aul=dict(max_iter=1), newton=dict(max_iter=1))),
+                ddp=dict(max_iter=1), aul=dict(max_iter=1), newton=dict(max_iter=1),
+                end_game=dict(exact_start=False))),
             "time budget": lambda: node.set_parameters([Parameter("time_budget_s", value=1e-3)]),
             "dynamics raise": lambda: setattr(pl, "base_problem", replace(
                 base, step=faulty_step(base.step, 3, "raise"))),
