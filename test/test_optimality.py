@@ -56,6 +56,35 @@ def test_kkt_polishing_returns_to_the_optimum_feasible_and_never_costlier():
     assert res.optimality.kkt_residual <= 1e-8
 
 
+def test_a_kkt_steps_restoration_runs_while_newton_converges_fast_and_no_longer(monkeypatch):
+    """Earth-Mars fuel-optimal: each KKT step's Newton restoration gets at most
+    kkt.restore_iter iterations and stops once its residual has not halved over
+    kkt.restore_stall_iter of them (Newton converges fast or not at all: design notes,
+    restoration stall); with them the exact end game still lands on the transcription's
+    603.5498 kg, feasible and KKT-converged."""
+    from daddy_core.solver import kkt_polish as kp
+    from daddy_core.solver.options import KKTOptions
+    from daddy_core.solver.results import Status
+    seen, real = [], kp.polish
+
+    def spy(problem, X, U, opts, deadline=None, maps=None):
+        res = real(problem, X, U, opts, deadline, maps=maps)
+        seen.append((opts.newton.max_iter, opts.newton.stall_iter, res))
+        return res
+
+    monkeypatch.setattr(kp, "polish", spy)
+    case = load_case("earth_mars")
+    prob = problem_from_case(case)
+    sol = solve(prob, case.cold_guess(prob.N), fuel_optimal=True,
+                options=case_options(case, True))
+    assert sol.converged and sol.final_mass_kg == pytest.approx(603.5498, abs=2e-3)
+    kkt = KKTOptions()
+    assert kkt.restore_stall_iter < kkt.restore_iter
+    assert seen and all((m, st) == (kkt.restore_iter, kkt.restore_stall_iter)
+                        for m, st, _ in seen)
+    assert any(r.status is Status.NEWTON_STALLED for _, _, r in seen)   # the rule acted
+
+
 def test_a_kkt_step_that_cannot_be_flown_refuses_its_shift_not_the_polishing(monkeypatch):
     """A KKT step whose point the stage integration cannot fly (on a small LEO raise a lightly
     shifted step left the elements' domain, NaN from a square root in the dynamics, and rk78

@@ -126,7 +126,8 @@ def _iteration(problem: Problem, X, U, hom, f: float, model: ConstraintModel,
     work = ~ineq | (g > -opts.newton.active_tol)
     scale = max(float(np.max(np.abs(H.diagonal()), initial=0.0)), 1e-12)
     maps = StageMaps.of(model.F, X, U, opts.eps_da)
-    restore_opts = opts.with_(newton=dict(max_iter=opts.kkt.restore_iter))
+    restore_opts = opts.with_(newton=dict(max_iter=opts.kkt.restore_iter,
+                                          stall_iter=opts.kkt.restore_stall_iter))
     newton_its = 0
     for lv in range(level, len(_SHIFTS)):
         shift = _SHIFTS[lv] * scale
@@ -187,9 +188,12 @@ def _restore(problem: Problem, model: ConstraintModel, X, U, opts: SolverOptions
     left is second order: chord iterations -- minimum-norm corrections on the step's own
     Jacobian (``model``'s D, factorised once) with exact float residuals -- usually take it
     below tol_newton at the cost of one float integration each. When they do not, Newton
-    (Alg. 11) with at most ``opts.newton.max_iter`` iterations: a step whose restoration needs
-    more left the region where the linearisation holds, and a larger shift is cheaper. None
-    (refused) when (X, U) violates the constraints by more than ``refuse_above``."""
+    (Alg. 11) with at most ``opts.newton.max_iter`` iterations (``kkt.restore_iter``), stopped
+    as soon as its residual has not halved over ``newton.stall_iter`` of them
+    (``kkt.restore_stall_iter``): Newton converges fast or not at all, and a step whose
+    restoration does not left the region where the linearisation holds -- a larger shift is
+    cheaper (design notes: restoration stall). None (refused) when (X, U) violates the
+    constraints by more than ``refuse_above``."""
     ineq = model.inequality_rows()
     rows, sigma, last = None, None, np.inf
     Xc, Uc = X, U

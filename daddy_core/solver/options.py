@@ -190,7 +190,8 @@ class KKTOptions(_Group):
     cost_slack: float = 5.0           # refuse a step missing its cost model by this many
     trial_violation: float = 100.0    # a step violating by this many times its size is refused
     chord_iter: int = 6               # chord iterations of a step's restoration
-    restore_iter: int = 4             # Newton iterations of a step's restoration
+    restore_iter: int = 10            # Newton iterations of a step's restoration, at most
+    restore_stall_iter: int = 2       # ... which stops when not halved over these (refused)
 
     def __post_init__(self):
         _check(self, "kkt")
