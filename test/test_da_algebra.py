@@ -133,3 +133,17 @@ def test_misuse_errors_name_the_problem():
         da.variables([1.0], order=0)
     with pytest.raises(DaddyError, match="leading axis"):
         da.evaluate(a[0], np.zeros(3))
+
+
+@pytest.mark.parametrize("order", [1, 2, 5])
+def test_tanh_matches_its_exponential_form_and_saturates_without_overflow(order):
+    """tanh of a DA: the same Taylor coefficients as 1 - 2 / (e^{2x} + 1) where that form is
+    safe, and finite (the step's flat tails) where e^{2x} overflows."""
+    from daddy_core.da import functions as dm
+    x = da.variables(np.array([0.3, -1.2]), order=order)
+    ref = 1.0 - 2.0 / (dm.exp(2.0 * x) + 1.0)
+    np.testing.assert_allclose(dm.tanh(x).c, ref.c, rtol=1e-12, atol=1e-14)
+    big = dm.tanh(da.variables(np.array([800.0, -800.0]), order=order))
+    assert np.all(np.isfinite(big.c))
+    np.testing.assert_allclose(big.c[0], [1.0, -1.0])
+    np.testing.assert_allclose(big.c[1:], 0.0, atol=1e-300)

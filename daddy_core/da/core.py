@@ -303,6 +303,19 @@ class DA:
             derivs.append(derivs[-1] * inv * ((p - j + 1) / j))
         return self.series(derivs)
 
+    def tanh(self) -> "DA":
+        """tanh: its derivatives are polynomials in t = tanh(cons), P_{j+1} = P_j' (1 - t^2),
+        so no exponential of a large argument overflows."""
+        t = np.tanh(self.cons)
+        P = np.polynomial.Polynomial([0.0, 1.0])
+        one_minus = np.polynomial.Polynomial([1.0, 0.0, -1.0])
+        derivs, fact = [t], 1.0
+        for j in range(1, self.order + 1):
+            P = P.deriv() * one_minus
+            fact *= j
+            derivs.append(P(t) / fact)
+        return self.series(derivs)
+
     def exp(self) -> "DA":
         e = np.exp(self.cons)
         derivs = [e]

@@ -29,6 +29,10 @@ def exp(x):
     return x.exp() if isinstance(x, DA) else np.exp(x)
 
 
+def tanh(x):
+    return x.tanh() if isinstance(x, DA) else np.tanh(x)
+
+
 def log(x):
     return x.log() if isinstance(x, DA) else np.log(x)
 

@@ -1,0 +1,101 @@
+"""The ideal solar sail of Leemans, Carzana and Heiligers (many-revolution solar-sail DDP, the
+paper's Sec. II.B), written once for floats, arrays and DA: the Sun's position from a
+low-precision analytic ephemeris, a smooth cylindrical Earth shadow, the sail normal from its
+cone and clock angles, the sail's acceleration, and the locally optimal steering law that is
+its initial guess and baseline. The first part of issue 45 (the model; the Sundman-staged
+problems and catalogue cases build on it).
+
+Frames and units: Earth-centred inertial, the Earth's equator as xy-plane (ECI, J2000);
+positions in any length unit shared by the arguments, accelerations in the units of the
+gravitational parameter given.
+"""
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from ..da import functions as dm
+
+AU_KM = 149_597_870.7
+GM_SUN_KM3_S2 = 1.32712440018e11
+# obliquity of the ecliptic at J2000 (Montenbruck & Gill, Satellite Orbits, eq. 3.43)
+OBLIQUITY_RAD = math.radians(23.43929111)
+JULIAN_CENTURY_S = 36525.0 * 86400.0
+
+
+def sun_position_km(t_s):
+    """The Sun's ECI position [km] (3, *batch) at t_s seconds since J2000 (TT ~ UTC here):
+    Montenbruck & Gill's low-precision series (Satellite Orbits, sec. 3.3.2, eq. 3.44-3.46),
+    ~0.1-1 % in distance and 0.01 deg in direction over 1950-2050; t_s a float, array or DA
+    (the Sun then moves with the state's time)."""
+    T = t_s * (1.0 / JULIAN_CENTURY_S)
+    M = math.radians(357.5256) + math.radians(35999.049) * T
+    lon = (math.radians(282.9400) + M + math.radians(6892.0 / 3600.0) * dm.sin(M)
+           + math.radians(72.0 / 3600.0) * dm.sin(2.0 * M))
+    r = (149.619 - 2.499 * dm.cos(M) - 0.021 * dm.cos(2.0 * M)) * 1e6
+    ce, se = math.cos(OBLIQUITY_RAD), math.sin(OBLIQUITY_RAD)
+    x, y = r * dm.cos(lon), r * dm.sin(lon)
+    return dm.stack([x, y * ce, y * se])
+
+
+def sunlight(r, r_sun, radius: float, width: float):
+    """The smoothed sunlight fraction (*batch) at ECI position r (3, *batch): 1 in sunlight, 0
+    in the Earth's cylindrical shadow, a product of two logistic steps of ``width`` (the
+    position's units) across the shadow's boundaries -- the side facing away from the Sun
+    (r . s_hat = 0) and the cylinder of ``radius`` about the Sun line. r_sun: the Sun's
+    position (3,) or (3, *batch)."""
+    d = dm.sqrt(r_sun[0] * r_sun[0] + r_sun[1] * r_sun[1] + r_sun[2] * r_sun[2])
+    along = (r[0] * r_sun[0] + r[1] * r_sun[1] + r[2] * r_sun[2]) / d      # towards the Sun
+    rho = dm.sqrt(r[0] * r[0] + r[1] * r[1] + r[2] * r[2] - along * along + width * width)
+    behind = 0.5 * (1.0 - dm.tanh(along * (1.0 / width)))
+    inside = 0.5 * (1.0 + dm.tanh((radius - rho) * (1.0 / width)))
+    return 1.0 - behind * inside
+
+
+def sail_frame(s_hat):
+    """The sail frame's axes (3 vectors (3, *batch)): s_hat, the sunlight direction (from the
+    Sun to the sail, unit), p = the ECI z-axis made orthogonal to s_hat, q = s_hat x p.
+    Interpretation (the paper's eq. 4-5 lost their symbols): the clock angle is measured from
+    p, so that at 90 deg the normal lies in the plane of s_hat and the equator when the Sun is
+    in it (the paper's in-plane steering of its 2-D case). Undefined for sunlight along z (the
+    Sun's declination stays within 23.5 deg)."""
+    s0, s1, s2 = s_hat[0], s_hat[1], s_hat[2]
+    p0, p1, p2 = -s2 * s0, -s2 * s1, 1.0 - s2 * s2          # z - (z . s) s
+    pn = 1.0 / dm.sqrt(p0 * p0 + p1 * p1 + p2 * p2)
+    p0, p1, p2 = p0 * pn, p1 * pn, p2 * pn
+    q = (s1 * p2 - s2 * p1, s2 * p0 - s0 * p2, s0 * p1 - s1 * p0)
+    return (s0, s1, s2), (p0, p1, p2), q
+
+
+def sail_normal(cone_free, clock, s_hat):
+    """The sail's unit normal (3, *batch) from the controls: the cone angle alpha = pi/2
+    tanh(cone_free) (the paper's tanh box: |alpha| < 90 deg, the normal never faces away from
+    the Sun) and the clock angle (rad, unbounded: periodic)."""
+    alpha = (0.5 * math.pi) * dm.tanh(cone_free)
+    ca, sa = dm.cos(alpha), dm.sin(alpha)
+    s, p, q = sail_frame(s_hat)
+    cd, sd = dm.cos(clock), dm.sin(clock)
+    return dm.stack([ca * s[i] + sa * (cd * p[i] + sd * q[i]) for i in range(3)])
+
+
+def sail_acceleration(r, r_sun, n, beta: float, gm_sun: float, light=1.0):
+    """The ideal sail's acceleration (3, *batch) (the paper's eq. 6): light beta gm_sun /
+    |r_s|^2 (s_hat . n)^2 n, r_s = r - r_sun the Sun-to-sail vector, n the unit normal
+    (``sail_normal``, n . s_hat >= 0), beta the lightness number, light the sunlight fraction
+    (``sunlight``)."""
+    rs = [r[i] - r_sun[i] for i in range(3)]
+    d2 = rs[0] * rs[0] + rs[1] * rs[1] + rs[2] * rs[2]
+    cos_a = (rs[0] * n[0] + rs[1] * n[1] + rs[2] * n[2]) / dm.sqrt(d2)
+    scale = light * (beta * gm_sun) / d2 * cos_a * cos_a
+    return dm.stack([scale * n[i] for i in range(3)])
+
+
+def locally_optimal_cone(theta):
+    """The cone angle alpha* [rad] that maximises the sail's acceleration along a direction at
+    angle theta [rad] from the sunlight, (cos alpha)^2 cos(theta - alpha) (McInnes, Solar
+    Sailing, sec. 4.3.2): tan alpha* = (-3 cos theta + sqrt(9 cos^2 theta + 8 sin^2 theta)) /
+    (4 sin theta); alpha* = 0 at theta = 0, and alpha* -> 90 deg as theta -> 180 deg."""
+    theta = np.asarray(theta, float)
+    c, s = np.cos(theta), np.sin(theta)
+    return np.sign(s) * np.arctan2(-3.0 * c + np.sqrt(9.0 * c * c + 8.0 * s * s), 4.0 * np.abs(s))
