@@ -92,6 +92,13 @@ class ThrottleForm:
         return dm.stack(u + [us])
 
 
+def intermediate_stages(U: np.ndarray, u_max: float, tol: float = 1e-3) -> int:
+    """The number of stages of the thrust U (N, 3) whose throttle |u| / u_max lies strictly
+    between tol and 1 - tol: neither coasting nor at the bound (a bang-bang plan has few)."""
+    s = np.linalg.norm(U, axis=1) / u_max
+    return int(np.sum((s > tol) & (s < 1 - tol)))
+
+
 def has_throttle_form(problem: Problem) -> bool:
     """``problem`` has what the exact fuel form needs (module docstring)."""
     step = problem.step

@@ -129,13 +129,14 @@ class GuidancePlanner:
         InputRejected before anything is touched.
         """
         x0 = self.checks.check_state(pos_m, vel_m_s, mass_kg, stamp_s, now_s)
-        shifted = self.shift(None if cold else self.plan, stamp_s, x0)
+        plan = None if cold else self.plan   # read once: another thread may adopt a plan
+        shifted = self.shift(plan, stamp_s, x0)
         warm = shifted.start is not None
         start = shifted.start or WarmStart(self.case.cold_guess(shifted.problem.N))
         opts = self.policy.options(warm, arrival=shifted.problem.N <= MIN_STAGES_LEFT)
         # the current plan may already fly above the derating: start from the rung it was
         # solved on, or the lowest rating it keeps to, instead of failing on the bounds below
-        rung = self._start_rung(self.plan, start.U) if warm else 0
+        rung = self._start_rung(plan, start.U) if warm else 0
         problem = self._rated(shifted.problem, rung)
         t0 = time.perf_counter()
         deadline = t0 + self.time_budget_s   # one budget for the whole re-plan, ladder included

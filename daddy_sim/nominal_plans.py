@@ -9,23 +9,13 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
-import numpy as np
-
+from daddy_core.throttle import intermediate_stages
 from daddy_ros.config import PLANS_DIR
 from daddy_ros.planner import GuidancePlanner
 
 from .sim import T0_S, TruthSim
 
 CASES = ("earth_mars", "halo_l2_l1")
-# a stage's throttle strictly between these is at intermediate thrust (the rest: bang-bang)
-BANG_BANG_TOL = 1e-3
-
-
-def intermediate_stages(U: np.ndarray, u_max: float) -> int:
-    """The number of stages of the controls U (N, 3) whose thrust is neither zero nor the
-    bound u_max (within BANG_BANG_TOL of the bound)."""
-    s = np.linalg.norm(U, axis=1) / u_max
-    return int(np.sum((s > BANG_BANG_TOL) & (s < 1 - BANG_BANG_TOL)))
 
 
 def nominal_plan(case: str, out: Path) -> str:

@@ -7,6 +7,7 @@ import pytest
 from daddy_core.catalogue import load_case, problem_from_case
 from daddy_core.errors import DaddyError
 from daddy_core.solver import SolverOptions, WarmStart, case_options, solve
+from daddy_core.throttle import intermediate_stages
 
 EARTH_MARS = load_case("earth_mars")
 K = 6   # the re-plan starts at this stage of the optimum
@@ -34,11 +35,6 @@ def _replan(prob, sol, dx: np.ndarray, **changes):
     return sub, solve(sub, warm, options=opts)
 
 
-def _intermediate(U, u_max) -> int:
-    s = np.linalg.norm(U, axis=1) / u_max
-    return int(np.sum((s > 1e-3) & (s < 1 - 1e-3)))
-
-
 @pytest.mark.parametrize("seed", [0, 1, 2])
 def test_a_re_plan_off_the_optimum_is_bang_bang_at_the_re_optimised_propellant(optimum, seed):
     """Earth-Mars at stage 6, the state 1000 km / 1 m/s off (random directions): the warm
@@ -54,7 +50,8 @@ def test_a_re_plan_off_the_optimum_is_bang_bang_at_the_re_optimised_propellant(o
     sub, warm = _replan(prob, sol, dx)
     assert warm.converged, warm.reason
     assert warm.max_violation <= 1e-9 and warm.repropagation_miss <= 1e-8
-    assert _intermediate(warm.U, prob.u_max) <= _intermediate(sol.U[K:], prob.u_max) + 1
+    assert intermediate_stages(warm.U, prob.u_max) <= intermediate_stages(sol.U[K:],
+                                                                          prob.u_max) + 1
     _, polished = _replan(prob, sol, dx, kkt=dict(tol=1e-5))
     assert polished.converged and polished.kkt_residual <= 1e-5, polished.reason
     assert warm.final_mass_kg == pytest.approx(polished.final_mass_kg, abs=1e-3)

@@ -91,12 +91,17 @@ def homotopy(ctx: SolveContext, X, U, steps: tuple, **kw) -> HomotopyResult:
                             ctx.clock.deadline, ctx.progress, **kw)
 
 
+def polished_fuel_with_form(ctx: SolveContext) -> bool:
+    """A polished fuel-optimal solve of a problem with an exact fuel form (``throttle``)."""
+    return ctx.polish and ctx.steps[-1][0] > 0 and has_throttle_form(ctx.problem)
+
+
 def exact_wanted(ctx: SolveContext) -> bool:
     """A polished fuel-optimal solve of a problem with an exact fuel form whose options ask for
     it (``SolverOptions.end_game.exact_fuel``) and for a KKT residual."""
     opts = ctx.opts
-    return (opts.end_game.exact_fuel and ctx.polish and ctx.steps[-1][0] > 0
-            and math.isfinite(opts.kkt.tol) and has_throttle_form(ctx.problem))
+    return (opts.end_game.exact_fuel and math.isfinite(opts.kkt.tol)
+            and polished_fuel_with_form(ctx))
 
 
 def opening(ctx: SolveContext, start: Start, duals: dict | None) -> Game:
@@ -168,12 +173,12 @@ def _kkt(ctx: SolveContext, end: End, hom: tuple) -> End:
     ctx.say(f"KKT polishing: {res.iterations} iterations, KKT residual {opt.kkt_residual:.2e} "
             f"-> {res.optimality.kkt_residual:.2e} ({res.reason})")
     end.X, end.U, end.optimality, end.maps = res.X, res.U, res.optimality, res.maps or end.maps
-    _count(ctx, res)
+    count_kkt_work(ctx, res)
     end.kkt_reason = res.reason
     return end
 
 
-def _count(ctx: SolveContext, res) -> None:
+def count_kkt_work(ctx: SolveContext, res) -> None:
     """A KKT polishing's work (``KKTResult``): its iterations and its restorations' Newton."""
     ctx.work.newton += res.newton_iterations
     ctx.work.kkt += res.iterations
@@ -194,7 +199,7 @@ def _exact_fuel(ctx: SolveContext, end: End, stall_iter: int) -> End | None:
         res = kkt_polish(fuel, end.X, V, EXACT,
                          opts.with_(kkt=dict(max_iter=opts.end_game.exact_fuel_max_iter)),
                          opt, ctx.clock.deadline, stall_iter)
-        _count(ctx, res)
+        count_kkt_work(ctx, res)
         ctx.say(f"exact fuel (throttle and direction): {res.iterations} KKT iterations, "
                 f"residual {opt.kkt_residual:.2e} -> {res.optimality.kkt_residual:.2e} "
                 f"({res.reason})")

@@ -26,10 +26,10 @@ import math
 import numpy as np
 
 from ..problem import Problem
-from ..throttle import has_throttle_form, throttle_form
+from ..throttle import throttle_form
 from . import newton
 from .context import SolveContext
-from .end_game import EXACT, End, Game
+from .end_game import EXACT, End, Game, count_kkt_work, polished_fuel_with_form
 from .homotopy import HomotopyResult
 from .kkt_polish import kkt_polish
 from .lagrangian import Multipliers
@@ -40,8 +40,7 @@ from .solution import WarmStart
 def exact_start_wanted(ctx: SolveContext) -> bool:
     """A polished fuel-optimal solve of a problem with an exact fuel form whose options ask
     for the exact warm start."""
-    return (ctx.opts.end_game.exact_start and ctx.polish and ctx.steps[-1][0] > 0
-            and has_throttle_form(ctx.problem))
+    return ctx.opts.end_game.exact_start and polished_fuel_with_form(ctx)
 
 
 def exact_opening(ctx: SolveContext, U0: np.ndarray, warm: WarmStart) -> Game | None:
@@ -71,8 +70,7 @@ def exact_opening(ctx: SolveContext, U0: np.ndarray, warm: WarmStart) -> Game | 
         if opt is not None and opt.kkt_residual > opts.kkt.tol:
             with ctx.clock.phase("kkt"):
                 kkt = kkt_polish(fuel, X, V, EXACT, opts, opt, ctx.clock.deadline)
-            ctx.work.newton += kkt.newton_iterations
-            ctx.work.kkt += kkt.iterations
+            count_kkt_work(ctx, kkt)
             X, V, opt, kkt_reason = kkt.X, kkt.U, kkt.optimality, kkt.reason
     mult = Multipliers.initial(problem, opts.aul.mu_init)
     mult.take_duals(warm.duals)
