@@ -168,37 +168,63 @@ def equinoctial_sundman(gm: float, exhaust_speed: float, j2: float = 0.0, j2_rad
     j2c = -1.5 * gm * j2 * j2_radius ** 2
 
     def rhs(L, x, u):
-        p, f, g, h, k, m = x[0], x[1], x[2], x[3], x[4], x[6]
+        p, h, k, m = x[0], x[3], x[4], x[6]
         sL, cL = dm.sin(L), dm.cos(L)
         inv_m = 1.0 / m
         ar, at, an = u[0] * inv_m, u[1] * inv_m, u[2] * inv_m
-        w = 1.0 + f * cL + g * sL
-        inv_w = 1.0 / w
-        sq = dm.sqrt(p) * inv_sqrt_gm     # sqrt(p / gm)
-        hk = h * sL - k * cL
-        s2 = 1.0 + h * h + k * k
         if j2c:
+            w = 1.0 + x[1] * cL + x[2] * sL
             wp = w * (1.0 / p)                     # 1 / r
             c = wp * wp * (wp * wp) * j2c          # -3/2 gm J2 R^2 / r^4
-            inv_s2 = 1.0 / s2
+            hk = h * sL - k * cL
+            inv_s2 = 1.0 / (1.0 + h * h + k * k)
             c_hk = c * hk * (inv_s2 * inv_s2)      # C hk / s2^2
             ar = ar + c - c_hk * hk * 12.0
             at = at + c_hk * (h * cL + k * sL) * 8.0
             an = an + c_hk * (1.0 - h * h - k * k) * 4.0
-        at_w, an_w = at * inv_w, an * inv_w
-        # dt/dL = 1 / Ldot; Ldot = sqrt(gm / p^3) w^2 + sqrt(p / gm) hk a_n / w
-        tau = 1.0 / (w * w * (1.0 / (sq * p)) + sq * hk * an_w)
-        sqt = sq * tau
-        an_half = an_w * s2 * 0.5 * sqt
-        return dm.vector([
-            p * at_w * 2.0 * sqt,
+        rates, tau = _gauss_sundman(x, sL, cL, ar, at, an, inv_sqrt_gm)
+        return dm.vector([*rates, _magnitude(u) * inv_c * tau])
+    return _indexed(rhs, SUNDMAN_MAX_STEP)
+
+
+def _gauss_sundman(x, sL, cL, ar, at, an, inv_sqrt_gm: float):
+    """The Gauss equations of the modified equinoctial elements and the time with the true
+    longitude as the independent variable: ([dp, df, dg, dh, dk, dt] / dL, dt/dL) under the
+    RTN acceleration (ar, at, an), x = [p, f, g, h, k, ...], sL, cL = sin L, cos L."""
+    p, f, g, h, k = x[0], x[1], x[2], x[3], x[4]
+    w = 1.0 + f * cL + g * sL
+    inv_w = 1.0 / w
+    sq = dm.sqrt(p) * inv_sqrt_gm     # sqrt(p / gm)
+    hk = h * sL - k * cL
+    s2 = 1.0 + h * h + k * k
+    at_w, an_w = at * inv_w, an * inv_w
+    # dt/dL = 1 / Ldot; Ldot = sqrt(gm / p^3) w^2 + sqrt(p / gm) hk a_n / w
+    tau = 1.0 / (w * w * (1.0 / (sq * p)) + sq * hk * an_w)
+    sqt = sq * tau
+    an_half = an_w * s2 * 0.5 * sqt
+    return [p * at_w * 2.0 * sqt,
             (ar * sL + ((w + 1.0) * cL + f) * at_w - g * hk * an_w) * sqt,
             (((w + 1.0) * sL + g) * at_w - ar * cL + f * hk * an_w) * sqt,
             an_half * cL,
             an_half * sL,
-            tau,
-            _magnitude(u) * inv_c * tau])
-    return _indexed(rhs, SUNDMAN_MAX_STEP)
+            tau], tau
+
+
+def mee_frame(x, sL, cL):
+    """The orbit's position r = (p / w) r_hat and its radial, transverse and normal unit
+    vectors in the inertial frame, from modified equinoctial elements x = [p, f, g, h, k, ...]
+    at true longitude L (sL, cL its sine and cosine; Walker et al. 1985): (r, r_hat, t_hat,
+    n_hat), each a list of 3 components (floats, arrays or DA)."""
+    p, f, g, h, k = x[0], x[1], x[2], x[3], x[4]
+    inv_s2 = 1.0 / (1.0 + h * h + k * k)
+    a2, hk2 = h * h - k * k, 2.0 * h * k
+    r_hat = [(cL + a2 * cL + hk2 * sL) * inv_s2, (sL - a2 * sL + hk2 * cL) * inv_s2,
+             (h * sL - k * cL) * (2.0 * inv_s2)]
+    n_hat = [k * (2.0 * inv_s2), h * (-2.0 * inv_s2), (1.0 - h * h - k * k) * inv_s2]
+    t_hat = [n_hat[1] * r_hat[2] - n_hat[2] * r_hat[1], n_hat[2] * r_hat[0] - n_hat[0] * r_hat[2],
+             n_hat[0] * r_hat[1] - n_hat[1] * r_hat[0]]
+    radius = p / (1.0 + f * cL + g * sL)
+    return [radius * c for c in r_hat], r_hat, t_hat, n_hat
 
 
 def rtn_basis(r, v) -> np.ndarray:

@@ -1,13 +1,14 @@
 """The ideal solar sail of Leemans, Carzana and Heiligers (many-revolution solar-sail DDP, the
 paper's Sec. II.B), written once for floats, arrays and DA: the Sun's position from a
-low-precision analytic ephemeris, a smooth cylindrical Earth shadow, the sail normal from its
+low-precision analytic ephemeris (``ephemeris``), a smooth cylindrical Earth shadow, the sail normal from its
 cone and clock angles, the sail's acceleration, and the locally optimal steering law that is
 its initial guess and baseline. The first part of issue 45 (the model; the Sundman-staged
 problems and catalogue cases build on it).
 
 Frames and units: Earth-centred inertial, the Earth's equator as xy-plane (ECI, J2000);
 positions in any length unit shared by the arguments, accelerations in the units of the
-gravitational parameter given.
+gravitational parameter given. Vectors come as lists of 3 components (floats, arrays or DA,
+as the right-hand sides use them; ``np.asarray`` or ``dm.stack`` makes one array).
 """
 from __future__ import annotations
 
@@ -17,26 +18,6 @@ import numpy as np
 
 from ..da import functions as dm
 
-AU_KM = 149_597_870.7
-GM_SUN_KM3_S2 = 1.32712440018e11
-# obliquity of the ecliptic at J2000 (Montenbruck & Gill, Satellite Orbits, eq. 3.43)
-OBLIQUITY_RAD = math.radians(23.43929111)
-JULIAN_CENTURY_S = 36525.0 * 86400.0
-
-
-def sun_position_km(t_s):
-    """The Sun's ECI position [km] (3, *batch) at t_s seconds since J2000 (TT ~ UTC here):
-    Montenbruck & Gill's low-precision series (Satellite Orbits, sec. 3.3.2, eq. 3.44-3.46),
-    ~0.1-1 % in distance and 0.01 deg in direction over 1950-2050; t_s a float, array or DA
-    (the Sun then moves with the state's time)."""
-    T = t_s * (1.0 / JULIAN_CENTURY_S)
-    M = math.radians(357.5256) + math.radians(35999.049) * T
-    lon = (math.radians(282.9400) + M + math.radians(6892.0 / 3600.0) * dm.sin(M)
-           + math.radians(72.0 / 3600.0) * dm.sin(2.0 * M))
-    r = (149.619 - 2.499 * dm.cos(M) - 0.021 * dm.cos(2.0 * M)) * 1e6
-    ce, se = math.cos(OBLIQUITY_RAD), math.sin(OBLIQUITY_RAD)
-    x, y = r * dm.cos(lon), r * dm.sin(lon)
-    return dm.stack([x, y * ce, y * se])
 
 
 def sunlight(r, r_sun, radius: float, width: float):
@@ -69,26 +50,26 @@ def sail_frame(s_hat):
 
 
 def sail_normal(cone_free, clock, s_hat):
-    """The sail's unit normal (3, *batch) from the controls: the cone angle alpha = pi/2
+    """The sail's unit normal (a list of 3 components (*batch)) from the controls: the cone angle alpha = pi/2
     tanh(cone_free) (the paper's tanh box: |alpha| < 90 deg, the normal never faces away from
     the Sun) and the clock angle (rad, unbounded: periodic)."""
     alpha = (0.5 * math.pi) * dm.tanh(cone_free)
     ca, sa = dm.cos(alpha), dm.sin(alpha)
     s, p, q = sail_frame(s_hat)
     cd, sd = dm.cos(clock), dm.sin(clock)
-    return dm.stack([ca * s[i] + sa * (cd * p[i] + sd * q[i]) for i in range(3)])
+    return [ca * s[i] + sa * (cd * p[i] + sd * q[i]) for i in range(3)]
 
 
 def sail_acceleration(r, r_sun, n, beta: float, gm_sun: float, light=1.0):
-    """The ideal sail's acceleration (3, *batch) (the paper's eq. 6): light beta gm_sun /
+    """The ideal sail's acceleration (a list of 3 components (*batch); the paper's eq. 6): light beta gm_sun /
     |r_s|^2 (s_hat . n)^2 n, r_s = r - r_sun the Sun-to-sail vector, n the unit normal
-    (``sail_normal``, n . s_hat >= 0), beta the lightness number, light the sunlight fraction
+    (``sail_normal``, n . s_hat >= 0; a list or (3, *batch)), beta the lightness number, light the sunlight fraction
     (``sunlight``)."""
     rs = [r[i] - r_sun[i] for i in range(3)]
     d2 = rs[0] * rs[0] + rs[1] * rs[1] + rs[2] * rs[2]
     cos_a = (rs[0] * n[0] + rs[1] * n[1] + rs[2] * n[2]) / dm.sqrt(d2)
     scale = light * (beta * gm_sun) / d2 * cos_a * cos_a
-    return dm.stack([scale * n[i] for i in range(3)])
+    return [scale * n[i] for i in range(3)]
 
 
 def locally_optimal_cone(theta):

@@ -29,6 +29,11 @@ MOON_RADIUS_KM = 1737.4
 # tabulated by Vallado, Fundamentals of Astrodynamics, 4th ed., App. D)
 EARTH_J2 = 1.08262668e-3
 EARTH_J2_RADIUS_KM = 6378.137
+# the solar-sail paper's Earth (Leemans, Carzana & Heiligers, Table 1): its cases' gravity field,
+# the zonal harmonics J2, J3, J4 with their reference radius
+SAIL_MU_EARTH_KM3_S2 = 398_600.4
+SAIL_EARTH_RADIUS_KM = 6378.1363
+SAIL_EARTH_ZONALS = (1.082626e-3, -2.533e-6, -1.6186e-6)
 # systems whose states are Cartesian [r (3), v (3), (m)]; the Earth-centred one's are modified
 # equinoctial elements, time and mass [p, f, g, h, k, t, m] (``models.equinoctial_sundman``)
 CARTESIAN_SYSTEMS = ("sun_two_body", "earth_moon_cr3bp", "double_integrator")
@@ -127,8 +132,9 @@ class Units:
             return self._convert_cartesian(X, length, speed, mass)
         X = np.array(X, dtype=float)
         X[..., 0] = length(X[..., 0])
-        if X.shape[-1] == 7:
+        if X.shape[-1] >= 6:      # [p, f, g, h, k, t, (m)]: a sail's state has no mass
             X[..., 5] = time(X[..., 5])
+        if X.shape[-1] == 7:
             X[..., 6] = mass(X[..., 6])
         return X
 
@@ -167,6 +173,14 @@ def earth_units(mass_kg: float = 1000.0) -> Units:
     return Units("earth_equinoctial", lu, tu, mass_kg, MU_EARTH_KM3_S2 * tu ** 2 / lu ** 3)
 
 
+def earth_sail_units(mass_kg: float = 1.0) -> Units:
+    """The solar-sail cases' units: ``earth_units``' (TU = 1 mean solar day, LU the radius of
+    a 1-TU circular orbit, 42 241 km) with the sail paper's gravitational parameter."""
+    tu = DAY_S
+    lu = (SAIL_MU_EARTH_KM3_S2 * (tu / (2 * math.pi)) ** 2) ** (1.0 / 3.0)
+    return Units("earth_sail", lu, tu, mass_kg, SAIL_MU_EARTH_KM3_S2 * tu ** 2 / lu ** 3)
+
+
 def unit_units() -> Units:
     """Dimensionless system (double integrator): every unit is 1 (m, s, kg)."""
     return Units("double_integrator", 1e-3, 1.0, 1.0, 1.0)
@@ -176,6 +190,7 @@ SYSTEM_UNITS = {
     "sun_two_body": sun_units,
     "earth_moon_cr3bp": earth_moon_units,
     "earth_equinoctial": earth_units,
+    "earth_sail": earth_sail_units,
     "double_integrator": lambda mass_kg=1.0: unit_units(),
 }
 
