@@ -46,19 +46,27 @@ def test_the_shadow_is_the_earths_cylinder_smoothed_over_its_width():
     assert half - math.pi == pytest.approx(math.asin(R_EARTH_KM / 42164.0), abs=w / 42164.0)
 
 
-def test_the_normal_is_a_unit_vector_that_never_faces_the_sun():
+def test_the_normal_is_a_unit_vector_that_faces_the_sun_at_its_cone_and_clock():
     rng = np.random.default_rng(4)
     s = rng.normal(size=(3, 500))
     s /= np.linalg.norm(s, axis=0)
     s[2] *= 0.4
     s /= np.linalg.norm(s, axis=0)
-    n = np.asarray(sail.sail_normal(rng.normal(scale=3.0, size=500),
-                                    rng.uniform(-7, 7, 500), s), float)
+    w1, w2 = rng.normal(scale=3.0, size=(2, 500))
+    n = np.asarray(sail.sail_normal(w1, w2, s), float)
     assert np.allclose(np.linalg.norm(n, axis=0), 1.0, atol=1e-12)
-    assert np.all(np.einsum("ik,ik->k", n, s) >= -1e-12)
+    cone, clock = sail.cone_clock(w1, w2)
+    np.testing.assert_allclose(np.einsum("ik,ik->k", n, s), np.cos(cone), atol=1e-12)
+    # the clock angle from the sail frame's p axis towards q
+    _, p, q = (np.asarray(a, float) for a in sail.sail_frame(s))
+    np.testing.assert_allclose(np.arctan2(np.einsum("ik,ik->k", n, q), np.einsum("ik,ik->k", n, p)),
+                               clock, atol=1e-12)
+    # normal_controls inverts cone_clock
+    np.testing.assert_allclose(np.array(sail.normal_controls(cone, clock)), [w1, w2], atol=1e-9)
     # the clock angle at 90 deg keeps the normal in the equator when the Sun is in it
-    n90 = np.asarray(sail.sail_normal(0.7, math.pi / 2, np.array([1.0, 0.0, 0.0])), float)
-    assert abs(n90[2]) < 1e-15 and n90[0] == pytest.approx(math.cos(math.pi / 2 * np.tanh(0.7)))
+    n90 = np.asarray(sail.sail_normal(*sail.normal_controls(0.7, math.pi / 2),
+                                      np.array([1.0, 0.0, 0.0])), float)
+    assert abs(n90[2]) < 1e-15 and n90[0] == pytest.approx(math.cos(0.7))
 
 
 def test_the_acceleration_is_the_ideal_sails_and_its_da_derivatives_are_its_own():
@@ -71,8 +79,8 @@ def test_the_acceleration_is_the_ideal_sails_and_its_da_derivatives_are_its_own(
     # facing the Sun: beta times the Sun's gravity at that distance, along the sunlight
     g_sun = GM_SUN / np.dot(r - sun, r - sun)
     np.testing.assert_allclose(a, beta * g_sun * s_hat, rtol=1e-12)
-    # derivatives in (r, cone, clock) from DA against central differences
-    z0 = np.array([r[0], r[1], r[2], 0.4, 1.1])
+    # derivatives in (r, w1, w2) from DA against central differences
+    z0 = np.array([r[0], r[1], r[2], 0.4, -1.1])
 
     def f(z):
         nn = sail.sail_normal(z[3], z[4], sail.sail_frame(_unit(z[:3] - sun))[0])

@@ -31,6 +31,7 @@ from ..dynamics import models
 from ..dynamics.units import (DAY_S, EARTH_J2, EARTH_J2_RADIUS_KM, EARTH_RADIUS_KM, SYSTEM_UNITS,
                               Spacecraft, Units)
 from ..errors import DaddyError
+from . import sail_cases
 from .edelbaum import check_reachable
 
 CASES_DIR = Path(__file__).with_name("cases")
@@ -187,7 +188,10 @@ def load_case(name_or_path: str | Path) -> Case:
 
 
 def case_from_dict(d: dict) -> Case:
-    """Validate and normalise a case description (see the module docstring for the fields)."""
+    """Validate and normalise a case description (see the module docstring for the fields);
+    a solar-sail case (``"system": "earth_sail"``) becomes a ``sail_cases.SailCase``."""
+    if isinstance(d, dict) and d.get("system") == sail_cases.SYSTEM:
+        return sail_cases.sail_case_from_dict(d)
     def need(key):
         if key not in d:
             raise DaddyError(f"case field {key!r} is missing")

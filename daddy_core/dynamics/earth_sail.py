@@ -5,12 +5,14 @@ the Earth's shadow, its zonal harmonics and the Sun's and the Moon's gravity
 (``perturbations``, ``ephemeris``). Written once for floats, arrays and DA, like every model.
 
 State x = [p, f, g, h, k, t] (6, *batch), normalised (``units.earth_sail_units``); no mass
-(the sail spends none). Control u = [cone_free, clock] (2, *batch): the cone angle alpha =
-pi/2 tanh(cone_free), the clock angle in rad (``sail.sail_normal``); or [cone_free] alone when
-the model fixes the clock angle (the paper's in-plane steering, clock = 90 deg).
+(the sail spends none). Control u = [w1, w2] (2, *batch): the sail normal's tangent-plane
+point (``sail.sail_normal``: tan(cone) = |w|, clock = atan2(w2, w1)); or [w] alone when the
+model fixes the clock angle (the paper's in-plane steering, clock = 90 deg): w = tan(cone), the
+cone signed.
 """
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 from typing import Callable
 
@@ -65,7 +67,10 @@ class Sail:
         rs = [r[i] - r_sun[i] for i in range(3)]
         inv_d = 1.0 / dm.sqrt(rs[0] * rs[0] + rs[1] * rs[1] + rs[2] * rs[2])
         s_hat = [c * inv_d for c in rs]
-        n = sail.sail_normal(u[0], self.clock if self.clock is not None else u[1], s_hat)
+        if self.clock is None:
+            n = sail.sail_normal(u[0], u[1], s_hat)
+        else:
+            n = sail.sail_normal(u[0] * math.cos(self.clock), u[0] * math.sin(self.clock), s_hat)
         light = 1.0
         if self.shadow_radius is not None:
             light = sail.sunlight(r, r_sun, self.shadow_radius, self.shadow_width)

@@ -1,7 +1,7 @@
 """The ideal solar sail of Leemans, Carzana and Heiligers (many-revolution solar-sail DDP, the
 paper's Sec. II.B), written once for floats, arrays and DA: the Sun's position from a
-low-precision analytic ephemeris (``ephemeris``), a smooth cylindrical Earth shadow, the sail normal from its
-cone and clock angles, the sail's acceleration, and the locally optimal steering law that is
+low-precision analytic ephemeris (``ephemeris``), a smooth cylindrical Earth shadow, the sail normal from two
+unbounded controls (the tangent-plane point of its direction), the sail's acceleration, and the locally optimal steering law that is
 its initial guess and baseline. The first part of issue 45 (the model; the Sundman-staged
 problems and catalogue cases build on it).
 
@@ -12,7 +12,6 @@ as the right-hand sides use them; ``np.asarray`` or ``dm.stack`` makes one array
 """
 from __future__ import annotations
 
-import math
 
 import numpy as np
 
@@ -49,15 +48,34 @@ def sail_frame(s_hat):
     return (s0, s1, s2), (p0, p1, p2), q
 
 
-def sail_normal(cone_free, clock, s_hat):
-    """The sail's unit normal (a list of 3 components (*batch)) from the controls: the cone angle alpha = pi/2
-    tanh(cone_free) (the paper's tanh box: |alpha| < 90 deg, the normal never faces away from
-    the Sun) and the clock angle (rad, unbounded: periodic)."""
-    alpha = (0.5 * math.pi) * dm.tanh(cone_free)
-    ca, sa = dm.cos(alpha), dm.sin(alpha)
+def sail_normal(w1, w2, s_hat):
+    """The sail's unit normal (a list of 3 components (*batch)) from the controls (w1, w2): the
+    point where the normal's line crosses the plane tangent to the unit sphere at s_hat, in the
+    sail frame's (p, q) axes (``sail_frame``): n = (s_hat + w1 p + w2 q) / sqrt(1 + w1^2 + w2^2).
+    So tan(cone) = |w| and the clock angle is atan2(w2, w1) (``cone_clock``); every w faces the
+    Sun (n . s_hat > 0) and the normal turns edge-on only as |w| -> inf.
+
+    Why not the paper's cone and clock angles in a tanh box: the clock angle is undefined at a
+    zero cone angle (the Sun-facing guess), where its gradient and curvature vanish, and the
+    tanh box flattens exponentially towards 90 deg, where a long step leaves the controls
+    stranded (design notes: the sail's controls)."""
     s, p, q = sail_frame(s_hat)
-    cd, sd = dm.cos(clock), dm.sin(clock)
-    return [ca * s[i] + sa * (cd * p[i] + sd * q[i]) for i in range(3)]
+    inv = 1.0 / dm.sqrt(1.0 + w1 * w1 + w2 * w2)
+    return [(s[i] + w1 * p[i] + w2 * q[i]) * inv for i in range(3)]
+
+
+def cone_clock(w1, w2):
+    """(cone, clock) [rad] of the normal of controls (w1, w2) (``sail_normal``): cone in
+    [0, 90 deg), clock in (-180, 180] deg."""
+    w1, w2 = np.asarray(w1, float), np.asarray(w2, float)
+    return np.arctan(np.hypot(w1, w2)), np.arctan2(w2, w1)
+
+
+def normal_controls(cone, clock):
+    """The controls (w1, w2) of the normal at cone angle ``cone`` (|cone| < 90 deg; a negative
+    cone is the opposite clock) and clock angle ``clock`` [rad] (``sail_normal``'s inverse)."""
+    t = np.tan(np.asarray(cone, float))
+    return t * np.cos(clock), t * np.sin(clock)
 
 
 def sail_acceleration(r, r_sun, n, beta: float, gm_sun: float, light=1.0):
