@@ -7,7 +7,7 @@ from __future__ import annotations
 
 import argparse
 import sys
-from datetime import datetime, timezone
+from datetime import datetime, timedelta, timezone
 
 import numpy as np
 
@@ -15,6 +15,8 @@ from . import trajectory_output
 from .errors import DaddyError
 from .catalogue import list_cases, load_case, problem_from_case
 from .catalogue.revolutions import RevolutionSearch, search_revolutions
+from .catalogue.sail_cases import (SAIL_METHOD, SailCase, SailGuess, sail_options, solve_sail,
+                                   write_sail_csv)
 from .catalogue.run_times import expected_run_time, measured_on, read_run_times
 from .solver import METHODS, Globalization, Solution, case_options, solve
 
@@ -24,7 +26,10 @@ def _parser() -> argparse.ArgumentParser:
     sub = ap.add_subparsers(dest="command", required=True)
     s = sub.add_parser("solve", help="solve a catalogue case (or a case file)")
     s.add_argument("case", help=f"case name ({', '.join(list_cases())}) or path to a .json file")
-    s.add_argument("--method", default="dyn", choices=METHODS)
+    s.add_argument("--method", default=None, choices=METHODS,
+                   help="DDP variant (default: dyn; hessdyn for solar-sail cases)")
+    s.add_argument("--guess", choices=[g.value for g in SailGuess], default=None,
+                   help="solar-sail cases: the initial controls (default: the steering law)")
     g = s.add_mutually_exclusive_group()
     g.add_argument("--energy", action="store_true", help="energy-optimal only (default for "
                    "the double integrator)")
@@ -83,6 +88,12 @@ def main(argv=None) -> int:
         return 0
     try:
         case = load_case(args.case)
+        if isinstance(case, SailCase):
+            return _solve_sail(case, args)
+        if args.guess:
+            raise DaddyError("--guess is for solar-sail cases; give a thrust case's initial "
+                             "controls with --warm-start")
+        args.method = args.method or "dyn"
         if args.oem and not case.staged_in_angle:
             raise DaddyError(f"--oem: an OEM is for Earth-centred cases; {case.name!r} is "
                              f"{case.system} (write --csv instead)")
@@ -131,6 +142,61 @@ def main(argv=None) -> int:
         print(f"daddy: not converged: {sol.reason}", file=sys.stderr)
         return 1
     return 0
+
+
+def _solve_sail(case: SailCase, args) -> int:
+    """``daddy solve`` of a solar-sail case: maximise the semi-major axis (``solve_sail``),
+    reported beside the steering law held per stage."""
+    refused = [name for name, given in (
+        ("--energy", args.energy), ("--fuel", args.fuel), ("--no-polish", args.no_polish),
+        ("--warm-start", args.warm_start), ("--stages", args.stages),
+        ("--r-min-km", args.r_min_km), ("--search-revolutions", args.search_revolutions),
+        ("--npz", args.npz)) if given]
+    if refused:
+        raise_error = f"{', '.join(refused)}: not for a solar-sail case ({case.name!r} " \
+                      "maximises its semi-major axis from --guess; its revolutions are in the " \
+                      "case file)"
+        print(f"daddy: error: {raise_error}", file=sys.stderr)
+        return 2
+    ddp = {} if args.globalization is None else {"globalization": args.globalization}
+    opts = sail_options(run=dict(time_budget_s=args.time_budget), ddp=ddp)
+    progress = None if args.quiet else (lambda line: print(line, flush=True))
+    try:
+        result = solve_sail(case, SailGuess(args.guess or SailGuess.STEERING_LAW.value), opts,
+                            progress, args.method or SAIL_METHOD)
+    except DaddyError as exc:
+        print(f"daddy: error: {exc}", file=sys.stderr)
+        return 2
+    sol = result.solution
+    _report(sol)
+    r = result.report()
+    print(f"  semi-major axis gain {r['delta_a_km']['osculating']:.4f} km (osculating"
+          + (f"; {r['delta_a_km']['j2_energy']:.4f} km from the energy with J2"
+             if "j2_energy" in r["delta_a_km"] else "")
+          + f"), steering law held per stage {r['steering_law_delta_a_km']['osculating']:.4f} km;"
+          f" eclipse width {case.eclipse_width_km} km")
+    if args.json:
+        import json
+        d = sol.to_dict()
+        d["sail"] = r
+        with open(args.json, "w") as f:
+            json.dump(d, f, indent=1, allow_nan=False)
+    if args.csv:
+        write_sail_csv(result, args.csv)
+    if args.oem:
+        trajectory_output.write_oem(sol, args.oem, args.epoch or _case_epoch(case))
+    if args.plot:
+        from .plotting import plot_sail
+        plot_sail(result, args.plot)
+    if not sol.converged:
+        print(f"daddy: not converged: {sol.reason}", file=sys.stderr)
+        return 1
+    return 0
+
+
+def _case_epoch(case: SailCase) -> datetime:
+    """The case's start as a UTC date-time (the OEM's default start)."""
+    return trajectory_output.J2000 + timedelta(seconds=case.epoch_s)
 
 
 def _search(case, fuel: bool, args) -> RevolutionSearch:

@@ -24,9 +24,13 @@ from .errors import DaddyError
 J2000 = datetime(2000, 1, 1, 12, 0, 0, tzinfo=timezone.utc)
 
 
+# the systems whose states are modified equinoctial elements and time (thrust cases: and mass)
+EARTH_SYSTEMS = ("earth_equinoctial", "earth_sail")
+
+
 def is_earth_centred(sol) -> bool:
     """The solution's states are modified equinoctial elements staged in true longitude."""
-    return sol.time_index is not None and sol.units.get("system") == "earth_equinoctial"
+    return sol.time_index is not None and sol.units.get("system") in EARTH_SYSTEMS
 
 
 def node_times_s(sol) -> np.ndarray:
@@ -44,14 +48,14 @@ def node_longitudes(sol) -> np.ndarray:
 
 def earth_cartesian_si(sol, X: np.ndarray | None = None) -> np.ndarray:
     """(N+1, 7) Earth-centred inertial states [position m (3), velocity m/s (3), mass kg] of an
-    Earth-centred solution (the frame of its elements: x towards the line of zero right
+    Earth-centred solution ((N+1, 6) without a mass state: a sail) (the frame of its elements: x towards the line of zero right
     ascension of the ascending node); ``X``: other states on the solution's nodes (default
     its own)."""
     units = Units.from_dict(sol.units)
     X = sol.X if X is None else X
     L = node_longitudes(sol)
     rv = models.mee_to_cartesian(X[:, :5].T, L, units.gm).T   # every node at once
-    return units.cartesian_si(np.column_stack([rv, X[:, 6]]))
+    return units.cartesian_si(np.column_stack([rv, X[:, 6:7]]))
 
 
 def cartesian_repropagation(sol, rhs) -> np.ndarray:
@@ -131,7 +135,12 @@ def csv_columns(sol) -> tuple[list[str], np.ndarray]:
 
 def write_csv(sol, path: str | Path) -> None:
     """The trajectory as CSV (``csv_columns``; empty fields where a value does not exist)."""
-    header, rows = csv_columns(sol)
+    write_rows(*csv_columns(sol), path)
+
+
+def write_rows(header: list[str], rows: np.ndarray, path: str | Path) -> None:
+    """A CSV of ``rows`` (K, len(header)) whose first column is an integer index; empty
+    fields for NaN."""
     lines = [",".join(header)]
     for r in rows:
         lines.append(",".join(str(int(r[0])) if j == 0 else ("" if math.isnan(v) else repr(float(v)))
@@ -143,7 +152,7 @@ def write_oem(sol, path: str | Path, epoch: datetime = J2000, object_name: str |
     """A CCSDS OEM 2.0 (KVN) of an Earth-centred solution: one segment, EME2000, UTC, the node
     states in km and km/s at the start epoch + the node times."""
     if not is_earth_centred(sol):
-        raise DaddyError("an OEM is for Earth-centred solutions (system earth_equinoctial); "
+        raise DaddyError(f"an OEM is for Earth-centred solutions (systems {EARTH_SYSTEMS}); "
                          f"{sol.case!r} is not one: write its CSV instead")
     if epoch.tzinfo is None:
         epoch = epoch.replace(tzinfo=timezone.utc)
@@ -161,6 +170,7 @@ def write_oem(sol, path: str | Path, epoch: datetime = J2000, object_name: str |
              "TIME_SYSTEM = UTC", f"START_TIME = {stamp(t[0])}", f"STOP_TIME = {stamp(t[-1])}",
              "META_STOP", "",
              f"COMMENT {sol.method} {'fuel' if sol.fuel_optimal else 'energy'}-optimal, "
-             f"converged {sol.converged}, final mass {sol.final_mass_kg:.3f} kg"]
+             f"converged {sol.converged}"
+             + ("" if sol.final_mass_kg is None else f", final mass {sol.final_mass_kg:.3f} kg")]
     lines += [stamp(s) + " " + " ".join(f"{v: .12e}" for v in row) for s, row in zip(t, rv)]
     Path(path).write_text("\n".join(lines) + "\n")

@@ -38,6 +38,7 @@ from ..dynamics import ephemeris, models, sail
 from ..dynamics.earth_sail import EarthForces, Sail, sail_sundman
 from ..dynamics.units import (AU_KM, MU_SUN_KM3_S2, SAIL_EARTH_RADIUS_KM, SAIL_EARTH_ZONALS,
                               Units, earth_sail_units)
+from .. import trajectory_output as out
 from ..errors import DaddyError
 from ..problem import Problem, flow_step
 from ..solver import Globalization, Method, Solution, SolverOptions, solve
@@ -51,6 +52,9 @@ MU_MOON_KM3_S2 = 4902.800066   # the Moon's gravitational parameter (DE440)
 # the steering law's cone angle is held below this: edge-on (90 deg) is w = inf
 LAW_MAX_CONE_RAD = math.radians(89.0)
 SAIL_METHOD = Method.HESSDYN
+# DDP's stop on the relative cost decrease: the objective ~ -da / a0 is 1e-5..1e-2 and its
+# last metres come at ~1e-6 relative per iteration (design notes: the sail's controls and sweep)
+SAIL_TOL_DDP = 1e-8
 
 
 class SailSteering(Enum):
@@ -249,21 +253,24 @@ def continuous_law(case: SailCase, rtol: float = 1e-11) -> np.ndarray:
 # --------------------------------------------------------------------------------- solve
 def sail_options(**sections) -> SolverOptions:
     """The sail solve's options: the trust region (the many-revolution paper's, sec. III.F)
-    on top of ``SolverOptions``' defaults; ``sections`` as SolverOptions takes them."""
-    ddp = {"globalization": Globalization.TRUST_REGION.value, **sections.pop("ddp", {})}
+    and DDP's relative-decrease stop at ``SAIL_TOL_DDP`` on top of ``SolverOptions``' defaults;
+    ``sections`` as SolverOptions takes them."""
+    ddp = {"globalization": Globalization.TRUST_REGION.value, "tol": SAIL_TOL_DDP,
+           **sections.pop("ddp", {})}
     return SolverOptions(ddp=ddp, **sections)
 
 
 @dataclass
 class SailResult:
     """A sail solve: the DDP ``solution``, its semi-major axis gains (``SailCase.delta_a_km``)
-    and the steering law's next to them (``law_delta_a_km``), with the law's CPU time."""
+    and those of the steering law held per stage (its states ``law_X`` (N+1, 6)) next to them."""
 
     case: SailCase
     solution: Solution
     delta_a_km: dict
     law_delta_a_km: dict
     guess: SailGuess
+    law_X: np.ndarray = field(repr=False, default=None)
 
     def report(self) -> dict:
         c = self.case
@@ -290,7 +297,7 @@ def solve_sail(case: SailCase, guess: SailGuess = SailGuess.STEERING_LAW,
                 options=options or sail_options(), case_name=case.name, progress=progress)
     sol.runtime_s.setdefault("cpu", time.process_time() - t0)
     return SailResult(case, sol, case.delta_a_km(sol.X, L_end),
-                      case.delta_a_km(X_law, L_end), guess)
+                      case.delta_a_km(X_law, L_end), guess, X_law)
 
 
 # ---------------------------------------------------------------------------- case files
@@ -417,3 +424,41 @@ def _j2_energy_a(rv: np.ndarray, gm: float, j2: float, radius: float) -> float:
     s = rv[2] / r
     energy = 0.5 * float(rv[3:] @ rv[3:]) - gm / r + gm * j2 * radius ** 2 * 0.5 * (3 * s * s - 1) / r ** 3
     return -gm / (2.0 * energy)
+
+
+# -------------------------------------------------------------------------------- outputs
+def sail_angles(case: SailCase, U: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """(N,) cone and (N,) clock angles [deg] of controls U (N, nu) (``sail.cone_clock``; an
+    in-plane sail's cone signed by its side, its clock 90 deg)."""
+    if case.steering is SailSteering.FREE:
+        cone, clock = sail.cone_clock(U[:, 0], U[:, 1])
+        return np.degrees(cone), np.degrees(clock)
+    return np.degrees(np.arctan(U[:, 0])), np.full(len(U), 90.0)
+
+
+def sunlight_at_nodes(case: SailCase, X: np.ndarray, L: np.ndarray) -> np.ndarray:
+    """(K,) the smoothed sunlight fraction at states X (K, 6), true longitudes L (1 without
+    eclipses)."""
+    if case.eclipse_width_km is None:
+        return np.ones(len(X))
+    model = case.sail_model()
+    rv = case.cartesian(X, L)
+    return np.array([float(sail.sunlight(r[:3], case.sun_position(x[5]), model.shadow_radius,
+                                         model.shadow_width)) for r, x in zip(rv, X)])
+
+
+def write_sail_csv(result: SailResult, path) -> None:
+    """The trajectory as CSV: node k, time [s], ECI position [m] and velocity [m/s], the
+    Keplerian elements (``trajectory_output.earth_elements``), the sunlight fraction at the
+    node, and the sail's cone and clock angles on stage k [deg] (empty at the last node)."""
+    sol, case = result.solution, result.case
+    L = out.node_longitudes(sol)
+    cone, clock = sail_angles(case, sol.U)
+    cols = np.column_stack([np.arange(sol.N + 1), out.node_times_s(sol),
+                            out.earth_cartesian_si(sol), out.earth_elements(sol),
+                            sunlight_at_nodes(case, sol.X, L),
+                            np.append(cone, np.nan), np.append(clock, np.nan)])
+    header = ["k", "time_s", "x_m", "y_m", "z_m", "vx_m_s", "vy_m_s", "vz_m_s", "a_km", "e",
+              "i_deg", "raan_deg", "argp_deg", "true_longitude_deg", "sunlight", "cone_deg",
+              "clock_deg"]
+    out.write_rows(header, cols, path)

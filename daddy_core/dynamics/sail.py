@@ -12,7 +12,6 @@ as the right-hand sides use them; ``np.asarray`` or ``dm.stack`` makes one array
 """
 from __future__ import annotations
 
-
 import numpy as np
 
 from ..da import functions as dm
