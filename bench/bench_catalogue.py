@@ -1,5 +1,6 @@
 """Run times of the catalogue: every case solved as `daddy solve CASE --energy` and `--fuel`
-(method dyn, cold guess, defaults), one process per solve, CPU seconds, with a cap; written to
+(method dyn, cold guess, defaults; a solar-sail case as `daddy solve CASE`, recorded as its
+"energy" solve), one process per solve, CPU seconds, with a cap; written to
 ``daddy_core/catalogue/run_times.json`` with ``--write``, which ``daddy list`` shows as each
 case's expected run time (with the machine and date of the measurement).
 
@@ -28,15 +29,19 @@ from daddy_core.catalogue.run_times import RUN_TIMES_FILE, read_run_times
 SOLVE = """
 import json, sys, time
 from daddy_core.catalogue import load_case, problem_from_case
+from daddy_core.catalogue.sail_cases import SailCase, sail_options, solve_sail
 from daddy_core.solver import case_options, solve
 case = load_case(sys.argv[1]); fuel = sys.argv[2] == "fuel"
 t = time.process_time()
-problem = problem_from_case(case)
-u0 = case.cold_guess(problem.N)
-sol = solve(problem, u0, fuel_optimal=fuel, options=case_options(case, fuel,
-            run=dict(time_budget_s=float(sys.argv[3]))))
+if isinstance(case, SailCase):   # `daddy solve` of a sail case: from the steering law
+    sol = solve_sail(case, options=sail_options(run=dict(time_budget_s=float(sys.argv[3])))).solution
+else:
+    problem = problem_from_case(case)
+    u0 = case.cold_guess(problem.N)
+    sol = solve(problem, u0, fuel_optimal=fuel, options=case_options(case, fuel,
+                run=dict(time_budget_s=float(sys.argv[3]))))
 print(json.dumps({"cpu_s": round(time.process_time() - t, 1), "converged": sol.converged,
-                  "final_mass_kg": None if case.spacecraft is None else round(sol.final_mass_kg, 3),
+                  "final_mass_kg": None if sol.final_mass_kg is None else round(sol.final_mass_kg, 3),
                   "reason": sol.reason[:120]}))
 """
 
@@ -60,7 +65,7 @@ def main() -> None:
     ap.add_argument("--write", action="store_true", help=f"update {RUN_TIMES_FILE}")
     args = ap.parse_args()
     work = [(c, kind) for c in args.cases for kind in ("energy", "fuel")
-            if not (kind == "fuel" and load_case(c).spacecraft is None)]
+            if not (kind == "fuel" and getattr(load_case(c), "spacecraft", None) is None)]
     t = time.perf_counter()
     with ThreadPoolExecutor(args.jobs) as pool:
         results = list(pool.map(lambda w: (w, run(*w, args.cap)), work))

@@ -9,7 +9,7 @@ from rcl_interfaces.msg import (FloatingPointRange, IntegerRange, ParameterDescr
                                 SetParametersResult)
 from rclpy.exceptions import InvalidParameterTypeException, InvalidParameterValueException
 
-from daddy_core.catalogue import list_cases, load_case
+from daddy_core.catalogue import list_cases, load_thrust_case
 from daddy_core.errors import DaddyError
 
 from .config import Parameter, parameters
@@ -55,8 +55,10 @@ def problem(p, has_parameter, configured: bool) -> str:
         return ""
     if p.name == "scenario" and isinstance(p.value, str):
         try:
-            load_case(p.value)
-        except DaddyError:
+            load_thrust_case(p.value)
+        except DaddyError as exc:
+            if p.value in list_cases():
+                return f"scenario: {exc}"
             return (f"scenario {p.value!r} is unknown (known: {', '.join(list_cases())}); "
                     "scenario is also read-only once configured")
     if p.name in NAMES and has_parameter(p.name) and configured:

@@ -18,7 +18,7 @@ from pathlib import Path
 
 import numpy as np
 
-from daddy_core.catalogue import load_case, problem_from_case
+from daddy_core.catalogue import load_thrust_case, problem_from_case
 from daddy_core.path_constraints import dense_margin
 from daddy_core.errors import DaddyError
 from daddy_core.problem import Problem
@@ -68,7 +68,7 @@ class GuidancePlanner:
             overrides["scenario"] = scenario
         self.config = replace(config or PlannerConfig(), **overrides)
         cfg = self.config
-        self.case = load_case(cfg.scenario)
+        self.case = load_thrust_case(cfg.scenario)
         if self.case.spacecraft is None:
             raise DaddyError(f"scenario {cfg.scenario!r} has no spacecraft (mass) model for "
                              "guidance")

@@ -187,6 +187,17 @@ def load_case(name_or_path: str | Path) -> Case:
     return case_from_dict(data)
 
 
+def load_thrust_case(name_or_path: str | Path) -> Case:
+    """``load_case`` for a consumer of thrust cases (the guidance node): a DaddyError naming a
+    solar-sail case as such."""
+    case = load_case(name_or_path)
+    if isinstance(case, sail_cases.SailCase):
+        raise DaddyError(f"case {case.name!r} is a solar-sail case (no thruster, no mass): the "
+                         f"guidance node flies thrust cases; solve it with `daddy solve "
+                         f"{case.name}`")
+    return case
+
+
 def case_from_dict(d: dict) -> Case:
     """Validate and normalise a case description (see the module docstring for the fields);
     a solar-sail case (``"system": "earth_sail"``) becomes a ``sail_cases.SailCase``."""
