@@ -78,7 +78,11 @@ def main() -> None:
                f"{args.jobs} solves at a time")
     print(f"machine: {machine}; {time.perf_counter() - t:.0f} s in all")
     if args.write:
-        table.update(machine=machine, date=date.today().isoformat(), cap_s=args.cap)
+        # every run carries its date; the table's machine and date are those of a full run
+        for (case, kind), r in results:
+            table["cases"][case][kind]["date"] = date.today().isoformat()
+        if set(args.cases) == set(list_cases()):
+            table.update(machine=machine, date=date.today().isoformat(), cap_s=args.cap)
         RUN_TIMES_FILE.write_text(json.dumps(table, indent=1, sort_keys=True) + "\n")
         print(f"wrote {RUN_TIMES_FILE}")
 

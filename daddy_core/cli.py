@@ -6,6 +6,7 @@ Exit status 0 when the solve converged, 1 when it did not (with a one-line reaso
 from __future__ import annotations
 
 import argparse
+import json
 import sys
 from datetime import datetime, timedelta, timezone
 
@@ -146,27 +147,22 @@ def main(argv=None) -> int:
 
 def _solve_sail(case: SailCase, args) -> int:
     """``daddy solve`` of a solar-sail case: maximise the semi-major axis (``solve_sail``),
-    reported beside the steering law held per stage."""
+    reported beside the steering law held per stage. A DaddyError for bad input (the caller
+    reports it, exit status 2)."""
     refused = [name for name, given in (
         ("--energy", args.energy), ("--fuel", args.fuel), ("--no-polish", args.no_polish),
         ("--warm-start", args.warm_start), ("--stages", args.stages),
         ("--r-min-km", args.r_min_km), ("--search-revolutions", args.search_revolutions),
         ("--npz", args.npz)) if given]
     if refused:
-        raise_error = f"{', '.join(refused)}: not for a solar-sail case ({case.name!r} " \
-                      "maximises its semi-major axis from --guess; its revolutions are in the " \
-                      "case file)"
-        print(f"daddy: error: {raise_error}", file=sys.stderr)
-        return 2
+        raise DaddyError(f"{', '.join(refused)}: not for a solar-sail case ({case.name!r} "
+                         "maximises its semi-major axis from --guess; its revolutions are in the "
+                         "case file)")
     ddp = {} if args.globalization is None else {"globalization": args.globalization}
     opts = sail_options(run=dict(time_budget_s=args.time_budget), ddp=ddp)
     progress = None if args.quiet else (lambda line: print(line, flush=True))
-    try:
-        result = solve_sail(case, SailGuess(args.guess or SailGuess.STEERING_LAW.value), opts,
-                            progress, args.method or SAIL_METHOD)
-    except DaddyError as exc:
-        print(f"daddy: error: {exc}", file=sys.stderr)
-        return 2
+    result = solve_sail(case, SailGuess(args.guess or SailGuess.STEERING_LAW.value), opts,
+                        progress, args.method or SAIL_METHOD)
     sol = result.solution
     _report(sol)
     r = result.report()
@@ -176,7 +172,6 @@ def _solve_sail(case: SailCase, args) -> int:
           + f"), steering law held per stage {r['steering_law_delta_a_km']['osculating']:.4f} km;"
           f" eclipse width {case.eclipse_width_km} km")
     if args.json:
-        import json
         d = sol.to_dict()
         d["sail"] = r
         with open(args.json, "w") as f:

@@ -20,7 +20,7 @@ constraint (the paper's objective). Its fields:
 - ``revolutions`` and ``stages_per_revolution``: the stages are equal arcs of true longitude.
 
 Solved with the Hess sweep and the trust region (``SAIL_METHOD``, ``sail_options``: why in the
-design notes, "the sail's controls and sweep"), from the locally optimal steering law held per
+design notes, "Solar sails"), from the locally optimal steering law held per
 stage (``steering_law``), which is also the baseline every result reports.
 """
 from __future__ import annotations
@@ -36,9 +36,10 @@ from scipy.integrate import solve_ivp
 
 from ..dynamics import ephemeris, models, sail
 from ..dynamics.earth_sail import EarthForces, Sail, sail_sundman
-from ..dynamics.units import (AU_KM, MU_SUN_KM3_S2, SAIL_EARTH_RADIUS_KM, SAIL_EARTH_ZONALS,
-                              Units, earth_sail_units)
-from .. import trajectory_output as out
+from ..dynamics.units import (AU_KM, MU_MOON_KM3_S2, MU_SUN_KM3_S2, SAIL_EARTH_RADIUS_KM,
+                              SAIL_EARTH_ZONALS, Units, earth_sail_units)
+from .. import trajectory_output
+from ..trajectory_output import J2000
 from ..errors import DaddyError
 from ..problem import Problem, flow_step
 from ..solver import Globalization, Method, Solution, SolverOptions, solve
@@ -47,14 +48,12 @@ SYSTEM = "earth_sail"
 SAIL_KEYS = ("name", "description", "source", "system", "x0", "beta", "epoch", "sun",
              "steering", "eclipse", "perturbations", "revolutions", "stages_per_revolution")
 ECLIPSE_KEYS = ("shadow", "width_km")
-J2000 = datetime(2000, 1, 1, 12, 0, 0, tzinfo=timezone.utc)
-MU_MOON_KM3_S2 = 4902.800066   # the Moon's gravitational parameter (DE440)
 # the steering law's cone angle is held below this: edge-on (90 deg) is w = inf
 LAW_MAX_CONE_RAD = math.radians(89.0)
 SAIL_METHOD = Method.HESSDYN
 # DDP's stop on the relative cost decrease: the objective ~ -da / a0 is 1e-5..1e-2 and its
-# last metres come at ~1e-6 relative per iteration (design notes: the sail's controls and sweep)
-SAIL_TOL_DDP = 1e-8
+# last metres come at ~1e-6 relative per iteration (design notes, "Solar sails")
+SAIL_TOL_DDP = 1e-7
 
 
 class SailSteering(Enum):
@@ -186,14 +185,14 @@ class SailCase:
         objective) and, with J2 among the perturbations, ``j2_energy`` (the energy with the J2
         potential, -gm / 2E: free of J2's periodic swing of the osculating a)."""
         lu = self.units.lu_km
-        out = {"osculating": float((_semi_major_axis(X[-1]) - _semi_major_axis(X[0])) * lu)}
+        gains = {"osculating": float((_semi_major_axis(X[-1]) - _semi_major_axis(X[0])) * lu)}
         if SailPerturbation.J2 not in self.perturbations:
-            return out
+            return gains
         ends = self.cartesian(X[[0, -1]], np.array([self.t_start, L_end]))
         a_j2 = [_j2_energy_a(rv, self.units.gm, SAIL_EARTH_ZONALS[0],
                              SAIL_EARTH_RADIUS_KM / lu) for rv in ends]
-        out["j2_energy"] = float((a_j2[1] - a_j2[0]) * lu)
-        return out
+        gains["j2_energy"] = float((a_j2[1] - a_j2[0]) * lu)
+        return gains
 
 
 # ------------------------------------------------------------------------- steering law
@@ -244,10 +243,10 @@ def continuous_law(case: SailCase, rtol: float = 1e-11) -> np.ndarray:
         return np.asarray(rhs(L, x, law_controls(case, x, L)), float)
 
     span = (case.t_start, case.t_start + 2.0 * math.pi * case.revolutions)
-    out = solve_ivp(f, span, case.x0, method="DOP853", rtol=rtol, atol=rtol * 1e-2)
-    if not out.success:
-        raise DaddyError(f"the continuous steering law's propagation failed: {out.message}")
-    return out.y[:, -1]
+    flown = solve_ivp(f, span, case.x0, method="DOP853", rtol=rtol, atol=rtol * 1e-2)
+    if not flown.success:
+        raise DaddyError(f"the continuous steering law's propagation failed: {flown.message}")
+    return flown.y[:, -1]
 
 
 # --------------------------------------------------------------------------------- solve
@@ -452,13 +451,14 @@ def write_sail_csv(result: SailResult, path) -> None:
     Keplerian elements (``trajectory_output.earth_elements``), the sunlight fraction at the
     node, and the sail's cone and clock angles on stage k [deg] (empty at the last node)."""
     sol, case = result.solution, result.case
-    L = out.node_longitudes(sol)
+    L = trajectory_output.node_longitudes(sol)
     cone, clock = sail_angles(case, sol.U)
-    cols = np.column_stack([np.arange(sol.N + 1), out.node_times_s(sol),
-                            out.earth_cartesian_si(sol), out.earth_elements(sol),
+    cols = np.column_stack([np.arange(sol.N + 1), trajectory_output.node_times_s(sol),
+                            trajectory_output.earth_cartesian_si(sol),
+                            trajectory_output.earth_elements(sol),
                             sunlight_at_nodes(case, sol.X, L),
                             np.append(cone, np.nan), np.append(clock, np.nan)])
     header = ["k", "time_s", "x_m", "y_m", "z_m", "vx_m_s", "vy_m_s", "vz_m_s", "a_km", "e",
               "i_deg", "raan_deg", "argp_deg", "true_longitude_deg", "sunlight", "cone_deg",
               "clock_deg"]
-    out.write_rows(header, cols, path)
+    trajectory_output.write_rows(header, cols, path)
