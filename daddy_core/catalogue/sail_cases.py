@@ -32,7 +32,6 @@ from datetime import datetime, timezone
 from enum import Enum
 
 import numpy as np
-from scipy.integrate import solve_ivp
 
 from ..dynamics import ephemeris, models, sail
 from ..dynamics.earth_sail import EarthForces, Sail, sail_sundman
@@ -237,6 +236,7 @@ def steering_law(case: SailCase, problem: Problem) -> tuple[np.ndarray, np.ndarr
 def continuous_law(case: SailCase, rtol: float = 1e-11) -> np.ndarray:
     """(6,) the final state of the steering law flown continuously (re-evaluated at every
     integrator step, DOP853): the law's own optimum-free bound on what a stage-held law loses."""
+    from scipy.integrate import solve_ivp   # (importing the catalogue keeps scipy.integrate out)
     rhs = case.rhs()
 
     def f(L, x):
