@@ -181,3 +181,12 @@ def test_the_500_revolution_geo_raise_beats_the_steering_law_within_a_percent_of
     assert np.all(np.isfinite(r.solution.X))
     assert r.delta_a_km["osculating"] >= r.law_delta_a_km["osculating"]
     assert r.delta_a_km["osculating"] == pytest.approx(3793.1, rel=0.01)
+
+
+def test_daddy_solve_plots_a_sail_case(tmp_path):
+    """The plot of a, e, i over revolutions and the sail angles with the shadow arcs (the
+    plots extra, installed by make test)."""
+    pytest.importorskip("matplotlib")
+    png = tmp_path / "acs3.png"
+    assert main(["solve", "acs3_3rev", "--quiet", "--plot", str(png)]) == 0
+    assert png.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n" and png.stat().st_size > 20_000
