@@ -15,7 +15,7 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass, field, replace
 from functools import cached_property
-from typing import Callable, Optional
+from typing import Any, Callable, Optional
 
 import numpy as np
 
@@ -136,6 +136,8 @@ class Problem:
             ``stage_t0[k]`` = t_start + the lengths of the stages before it.
         time_index: index of the physical time in the state when the independent variable is
             not time (Sundman-transformed stages), else None.
+        parameters: set by ``static_parameters``: where the static parameters sit in the
+            state and control (a ``ParameterLayout``); None for a problem without them.
         labels: optional names of the constraints' components for reports, by function:
             {"g_ineq": ("thrust bound", ...), "g_teq": ("x", ...), ...}.
     """
@@ -163,6 +165,7 @@ class Problem:
     g_path: Optional[Callable] = None
     path_samples: int = 4
     path_offset: Optional[np.ndarray] = None
+    parameters: Optional[Any] = None   # static_parameters.ParameterLayout of an augmented problem
 
     def __post_init__(self):
         x0 = np.asarray(self.x0, dtype=float)

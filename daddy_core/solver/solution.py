@@ -87,6 +87,7 @@ class Solution:
     # problems with a g_path: -max of g_path along the DOP853 re-propagation of every stage
     # (``path_constraints.dense_margin``; >= 0: it holds between the nodes too); None otherwise
     min_path_margin: float | None = None
+    parameters: dict | None = None   # static parameters {name: value} (``static_parameters``)
     stage_maps: StageMaps | None = field(default=None, repr=False, compare=False)
 
     _ARRAYS = ("X", "U", "stage_dt", "gains_a", "gains_b")

@@ -11,6 +11,8 @@ Each step lives in its own module; this one only chains them.
 """
 from __future__ import annotations
 
+from dataclasses import replace
+
 import numpy as np
 
 from ..path_constraints import violated_at_start
@@ -47,6 +49,14 @@ def solve(problem: Problem, u_guess=None, method: Method | str = Method.DYN,
         a ``Solution``. A solve that fails returns ``converged=False`` with the reason and the
         best feasible-so-far iterate (never NaN).
     """
+    if problem.parameters is not None:   # static parameters (``static_parameters``)
+        layout = problem.parameters
+        guess = u_guess if u_guess is None or isinstance(u_guess, (Solution, WarmStart)) \
+            else layout.padded(u_guess)
+        sol = solve(replace(problem, parameters=None), guess, method, fuel_optimal, polish,
+                    options, case_name, progress)
+        sol.parameters = layout.values(sol.X)
+        return sol
     opts = options or SolverOptions()
     method = Method.parse(method)
     if progress is None and opts.run.verbose:
