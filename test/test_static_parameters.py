@@ -10,7 +10,7 @@ import pytest
 from daddy_core.da import functions as dm
 from daddy_core.errors import DaddyError
 from daddy_core.problem import Problem, flow_step
-from daddy_core.solver import SolverOptions, solve
+from daddy_core.solver import Solution, SolverOptions, solve
 from daddy_core.static_parameters import StaticParameter, with_free_time, with_parameters
 
 TIGHT = SolverOptions(kkt=dict(tol=1e-9))   # the issue's 1e-6 on T needs the KKT end game
@@ -41,6 +41,7 @@ def test_free_time_double_integrator_reaches_the_issues_optimum():
     assert sol.cost == pytest.approx(10.3344207, abs=1e-6)
     assert sol.cost - T == pytest.approx(2.5836052, abs=1e-6)
     np.testing.assert_allclose(sol.X[-1, :2], [10.0, 0.0], atol=1e-8)
+    assert Solution.from_json(sol.to_json()).parameters == sol.parameters   # in the JSON too
 
 
 def test_free_time_on_a_continuous_right_hand_side():
