@@ -137,7 +137,8 @@ def with_free_time(problem: Problem, lower: float, upper: float, guess: float | 
                          f"{guess!r}")
     # the parameter is theta = ln(T / reference): every theta is a positive time, so no
     # iterate can make the durations -- and a cost such as sum u^2 dt -- negative
-    log = lambda t: math.log(t / reference)   # noqa: E731
+    def log(t):
+        return math.log(t / reference)
     param = StaticParameter(name, log(lower), log(upper), log(guess), 1.0)
 
     def report(raw):
