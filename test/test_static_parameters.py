@@ -60,8 +60,8 @@ def test_minimum_time_is_bang_bang_with_the_switch_halfway():
     """D = 1, |u| <= 1, N = 20, J = T: T* = 2, u = +1 then -1, switching at N / 2.
 
     The solve reaches T* to 1e-8, but the run does not report converged. At this vertex 41
-    constraints are active on 40 variables, and the least-squares KKT measure reports about
-    5e-3 there (noted on issue 46)."""
+    constraints are active on 40 variables, and the optimality measure's banded multipliers
+    leave about 5e-3 (a dense bounded least squares finds 3e-15: docs/parameters.md)."""
     def bound(x, u, dt):
         return dm.stack([u[0] - 1.0, -u[0] - 1.0])
     p = _rest_to_rest(1.0, 20, stage_cost=lambda x, u, dt, hom=(0.0, 1.0): 0.0 * u[0],
