@@ -134,3 +134,30 @@ def test_three_phases_with_unequal_stages_and_a_velocity_jump():
 def test_bad_phases_are_refused_by_field(phases, field):
     with pytest.raises(DaddyError, match=field):
         multi_phase("bad", np.ones(6), X_T, phases, lambda x, xt: 0.0 * x[0], nu=3)
+
+
+def test_the_second_order_multiplier_update_solves_the_lq_problem_with_one_update():
+    """Linear dynamics and constraints, quadratic cost: the Lagrangian's quadratic model is
+    exact, so one second-order update gives the optimal multipliers and the next DDP solve
+    ends feasible -- two AUL solves, no polishing -- where eq. 9's two solves are not there."""
+    names = [f"w{i}" for i in range(6)]
+    one = Phase("one", np.ones(5), _seed, _energy, link=_continuity())
+    two = Phase("two", np.ones(5), _seed, _energy, start=_phase_start(names),
+                params=tuple(StaticParameter(n, -50.0, 50.0, 0.0, 1.0) for n in names))
+    problem = multi_phase("seed_lq", np.ones(6), X_T, [one, two], lambda x, xt: 0.0 * x[0],
+                          nu=3, g_teq=_target)
+    two_solves = dict(max_iter=2)
+    sol = solve(problem, np.zeros((10, 3)), fuel_optimal=False, polish=False,
+                options=SolverOptions(aul=dict(two_solves, multiplier_update="second_order")))
+    assert sol.converged and sol.max_violation < 1e-12
+    assert sol.cost == pytest.approx(2.9742424242, abs=1e-9)
+    np.testing.assert_allclose(sol.duals["lam_t"], [3 / 55, 37 / 165, -23 / 165, 3 / 55,
+                                                    -61 / 55, 73 / 55], atol=1e-9)
+    first = solve(problem, np.zeros((10, 3)), fuel_optimal=False, polish=False,
+                  options=SolverOptions(aul=two_solves))
+    assert not first.converged and abs(first.parameters["w2"] - 163 / 33) > 1e-3
+
+
+def test_an_unknown_multiplier_update_is_named():
+    with pytest.raises(DaddyError, match="options.aul.multiplier_update"):
+        SolverOptions(aul=dict(multiplier_update="third_order"))

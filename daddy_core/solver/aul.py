@@ -11,9 +11,10 @@ import numpy as np
 
 from ..problem import largest, max_violation
 from . import aul_safeguards as safe
+from . import multiplier_update
 from .ddp import DDPResult, DDPStats, ddp
 from .lagrangian import Multipliers
-from .options import Method, SolverOptions
+from .options import Method, MultiplierUpdate, SolverOptions
 from .results import Status, StepResult
 from .sweeps import Gains, Stages
 
@@ -42,6 +43,16 @@ def update_multipliers(mult: Multipliers, g, gt, opts: SolverOptions) -> Multipl
                        np.clip(lam_t, -clip, clip),
                        np.minimum(mult.mu_t * opts.aul.mu_growth, opts.aul.mu_max),
                        mult.n_ineq, mult.n_tineq)
+
+
+def _next_multipliers(st: Stages, mult: Multipliers, g, gt, opts: SolverOptions) -> Multipliers:
+    """The multipliers of the next DDP solve: eq. 9, or the second-order update where the
+    options ask for it and its KKT system can be solved (``multiplier_update``)."""
+    if opts.aul.multiplier_update is MultiplierUpdate.SECOND_ORDER:
+        new = multiplier_update.second_order(st, mult, opts)
+        if new is not None:
+            return new
+    return update_multipliers(mult, g, gt, opts)
 
 
 def aul(st: Stages, method: Method, opts: SolverOptions, stats: DDPStats,
@@ -86,7 +97,7 @@ def aul(st: Stages, method: Method, opts: SolverOptions, stats: DDPStats,
         if status is not None:
             return AULResult(status is Status.AUL_CONVERGED, it, status, st, mult, gmax,
                              rho_last, gains)
-        mult = update_multipliers(mult, g, gt, opts)
+        mult = _next_multipliers(st, mult, g, gt, opts)
         st = st.with_costs(mult, hom)
     return AULResult(False, opts.aul.max_iter, Status.AUL_MAX_ITER, st, mult, gmax, rho_last,
                      gains)

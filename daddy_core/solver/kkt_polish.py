@@ -120,7 +120,7 @@ def _iteration(problem: Problem, X, U, hom, f: float, model: ConstraintModel,
     restored step lowers the cost by at least a tenth of the quadratic model's prediction:
     (X, U, cost, Newton iterations, the QP's multipliers, the next level), or None when no
     shift does. c: the cost gradient at (X, U)."""
-    Hf, H = _hessians(problem, X, U, hom, model, mu)
+    Hf, H = hessians(problem, X, U, hom, model, mu)
     g = model.residual()
     ineq = model.inequality_rows()
     work = ~ineq | (g > -opts.newton.active_tol)
@@ -131,7 +131,7 @@ def _iteration(problem: Problem, X, U, hom, f: float, model: ConstraintModel,
     newton_its = 0
     for lv in range(level, len(_SHIFTS)):
         shift = _SHIFTS[lv] * scale
-        dY, mu_new = _step(H, shift, model.D, c, g, ineq, work)
+        dY, mu_new = kkt_step(H, shift, model.D, c, g, ineq, work)
         if dY is None:
             continue
         predicted = -(c @ dY + 0.5 * (dY @ (H @ dY)))
@@ -227,7 +227,7 @@ def _exact_values(problem: Problem, X, U):
     return values, violation
 
 
-def _step(H: sp.csr_matrix, shift: float, D: sp.csr_matrix, c: np.ndarray, g: np.ndarray,
+def kkt_step(H: sp.csr_matrix, shift: float, D: sp.csr_matrix, c: np.ndarray, g: np.ndarray,
           ineq: np.ndarray, work: np.ndarray):
     """The working-set QP step dY and its multipliers (in D's rows, zero off the working set)
     (module docstring); (None, None) if the KKT matrix is singular."""
@@ -255,7 +255,7 @@ def _step(H: sp.csr_matrix, shift: float, D: sp.csr_matrix, c: np.ndarray, g: np
     return sol[:n], mu
 
 
-def _hessians(problem: Problem, X, U, hom, model: ConstraintModel, mu: np.ndarray):
+def hessians(problem: Problem, X, U, hom, model: ConstraintModel, mu: np.ndarray):
     """The cost's and the Lagrangian's Hessians over Y (N w x N w each, w = nx + nu), from the
     order-2 expansions of the costs and of the model (every constraint in its rows,
     ``every_constraint``) with the multipliers mu in those rows."""

@@ -60,11 +60,20 @@ class Globalization(Enum):
     TRUST_REGION = "trust_region"
 
 
+class MultiplierUpdate(Enum):
+    """How the AUL moves its multipliers after each DDP solve: eq. 9's first-order step
+    lam + mu g, or the second-order one of HDDP and DA-HDDP (``multiplier_update``: the
+    multipliers of the KKT system of the Lagrangian's quadratic model at the DDP solution)."""
+
+    FIRST_ORDER = "first_order"
+    SECOND_ORDER = "second_order"
+
+
 def _check(group: object, prefix: str) -> None:
     """Every number of an options group non-negative and not NaN (DaddyError naming it)."""
     for f in fields(group):
         v = getattr(group, f.name)
-        if f.type in ("bool", "Globalization") or isinstance(v, bool):
+        if f.type in ("bool", "Globalization", "MultiplierUpdate") or isinstance(v, bool):
             continue
         if not isinstance(v, (int, float)) or v != v or v < 0:
             raise DaddyError(f"options.{prefix}.{f.name} must be a non-negative number, got {v!r}")
@@ -139,10 +148,19 @@ class AULOptions(_Group):
     mu_growth: float = 10.0           # penalty growth per outer iteration
     stall_iter: int = 3               # solves at mu_max, violation not halved: stalled (0: off)
     tr_fallback: bool = True          # a line-search solve cut off is retried with the trust region
+    multiplier_update: MultiplierUpdate = MultiplierUpdate.FIRST_ORDER   # eq. 9, or second-order
 
     def __post_init__(self):
         _check(self, "aul")
         _positive(self, "aul", "tol", "mu_growth")
+        if not isinstance(self.multiplier_update, MultiplierUpdate):
+            try:
+                object.__setattr__(self, "multiplier_update",
+                                   MultiplierUpdate(self.multiplier_update))
+            except ValueError:
+                raise DaddyError("options.aul.multiplier_update must be one of "
+                                 f"{[m.value for m in MultiplierUpdate]}, got "
+                                 f"{self.multiplier_update!r}") from None
 
 
 @dataclass(frozen=True)
