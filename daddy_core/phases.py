@@ -103,6 +103,8 @@ def multi_phase(name: str, x0, x_target, phases, terminal_cost: Callable, nu: in
     upper = np.array([q.upper for q in params])
     iw, iphi, ik, iL = nx, nx + n, nx + n + 1, nx + n + 2
     links = [_link_size(ph, i, x0, params) for i, ph in enumerate(phases)]
+    for i, ph in enumerate(phases):
+        _check_start(ph, i, nx, params)
     n_ineq = [_rows(ph.g_ineq, x0, nu, ph) for ph in phases]
     n_eq = [_rows(ph.g_eq, x0, nu, ph) for ph in phases]
 
@@ -246,6 +248,21 @@ def _link_size(ph: Phase, i: int, x0: np.ndarray, params) -> int:
         raise DaddyError(f"phases[{i}] ({ph.name!r}).link must return a vector of n >= 1 "
                          f"equalities, got shape {psi.shape}")
     return psi.size
+
+
+def _check_start(ph: Phase, i: int, nx: int, params) -> None:
+    """A DaddyError naming the phase when its start Gamma(omega) is not a state of nx."""
+    if ph.start is None:
+        return
+    omega = np.array([q.guess for q in params])
+    try:
+        x = np.asarray(ph.start(omega), float)
+    except Exception as exc:   # the user's function failing is bad input, named
+        raise DaddyError(f"phases[{i}] ({ph.name!r}).start raised {type(exc).__name__}: "
+                         f"{exc}") from exc
+    if x.shape != (nx,):
+        raise DaddyError(f"phases[{i}] ({ph.name!r}).start must return the state ({nx},) of "
+                         f"x0, got shape {x.shape}")
 
 
 def _rows(fn, x0, nu, ph) -> int:

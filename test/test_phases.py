@@ -129,6 +129,9 @@ def test_three_phases_with_unequal_stages_and_a_velocity_jump():
       Phase("b", np.ones(2), _seed, _energy)], r"phases\[0\].*link must return a vector"),
     ([Phase("a", np.ones(2), _seed, _energy, link=lambda xe, xs, om: xs[7] - xe[7]),
       Phase("b", np.ones(2), _seed, _energy)], r"phases\[0\].*link raised IndexError"),
+    ([Phase("a", np.ones(2), _seed, _energy),
+      Phase("b", np.ones(2), _seed, _energy, start=lambda om: np.zeros(4),
+            params=(StaticParameter("w", -1.0, 1.0),))], r"phases\[1\].*start must return"),
     ([], "non-empty"),
 ])
 def test_bad_phases_are_refused_by_field(phases, field):
