@@ -161,3 +161,70 @@ def solve_peer(case, problem, U0: np.ndarray, fuel: bool, cap_s: float,
     status = str(stats["return_status"])
     return PeerResult(status in ("Solve_Succeeded", "Solved_To_Acceptable_Level"), status,
                       int(stats["iter_count"]), cpu, value, miss, viol)
+
+
+def _kepler_target(xt, dt, gm, ca):
+    """The target (r, v) (6,) on its Keplerian orbit dt after xt, with the eccentric-anomaly
+    difference E an NLP variable: returns (state, Kepler's equation residual). Written here
+    again, independently of ``daddy_core.dynamics.kepler``."""
+    r0, v0 = np.asarray(xt[:3], float), np.asarray(xt[3:6], float)
+    rn = float(np.linalg.norm(r0))
+    a = 1.0 / (2.0 / rn - float(v0 @ v0) / gm)
+    sigma = float(r0 @ v0) / np.sqrt(gm)
+    E = ca.MX.sym("E")
+    kepler = (E + sigma / np.sqrt(a) * (1 - ca.cos(E)) - (1 - rn / a) * ca.sin(E)
+              - dt * np.sqrt(gm / a ** 3))
+    r = a + (rn - a) * ca.cos(E) + sigma * np.sqrt(a) * ca.sin(E)
+    f = 1 - a / rn * (1 - ca.cos(E))
+    g = a * sigma / np.sqrt(gm) * (1 - ca.cos(E)) + rn * np.sqrt(a / gm) * ca.sin(E)
+    fd = -np.sqrt(gm * a) / (r * rn) * ca.sin(E)
+    gd = 1 - a / r * (1 - ca.cos(E))
+    return E, ca.vertcat(f * r0 + g * v0, fd * r0 + gd * v0), kepler
+
+
+def solve_peer_free_tof(case, problem, U0: np.ndarray, window, cap_s: float,
+                        substeps: int | None = None):
+    """The fuel-optimal transcription of a Sun-centred case with the time of flight T free in
+    ``window`` (normalised) and the target moving on its Keplerian orbit to T: equal stages
+    T / N, the same throttle-direction form as ``solve_peer``. Returns (final mass [kg] of the
+    transcription, T [normalised], IPOPT status, iterations, CPU s, the controls (N, 3))."""
+    import casadi as ca
+    t0 = time.process_time()
+    N, nx = problem.N, problem.nx
+    F = _stage_flow(case, problem, substeps or SUBSTEPS[case.system], ca).map(N)
+    X, W, S = ca.MX.sym("X", nx, N + 1), ca.MX.sym("W", 3, N), ca.MX.sym("S", 1, N)
+    T = ca.MX.sym("T")
+    u_max = problem.u_max
+    U = u_max * W * ca.repmat(S, 3, 1)
+    defects = F(X[:, :-1], U, ca.repmat(T / N, 1, N)) - X[:, 1:]
+    E, target, kepler = _kepler_target(problem.x_target, T - case.tof, case.units.gm, ca)
+    m_dry = case.spacecraft.dry_mass_kg / case.units.mu_kg
+    g = [ca.vec(defects), X[:6, -1] - target, kepler, (m_dry - X[6, 1:]).T,
+         ca.sum1(W ** 2).T - 1]
+    zeros = np.zeros(nx * N + 7)
+    lbg = np.concatenate([zeros, np.full(N, -np.inf), np.zeros(N)])
+    ubg = np.zeros(nx * N + 7 + 2 * N)
+    solver = ca.nlpsol("peer_free", "ipopt", {
+        "x": ca.vertcat(ca.vec(X), ca.vec(W), ca.vec(S), T, E), "f": -X[6, -1],
+        "g": ca.vertcat(*g)}, {
+        "ipopt.tol": 1e-8, "ipopt.print_level": 0, "ipopt.sb": "yes", "print_time": False,
+        "ipopt.linear_solver": "mumps", "ipopt.max_cpu_time": float(cap_s),
+        "ipopt.max_iter": 3000})
+    iw = nx * (N + 1)
+    n = iw + 4 * N + 2
+    lbx, ubx = np.full(n, -np.inf), np.full(n, np.inf)
+    lbx[:nx], ubx[:nx] = problem.x0, problem.x0
+    lbx[iw + 3 * N:iw + 4 * N], ubx[iw + 3 * N:iw + 4 * N] = 0.0, 1.0
+    lbx[n - 2], ubx[n - 2] = window
+    s0 = np.linalg.norm(U0, axis=1)
+    d0 = np.where(s0[:, None] > 0, U0 / np.where(s0 > 0, s0, 1.0)[:, None], [1.0, 0.0, 0.0])
+    X0 = problem.rollout(U0)
+    res = solver(x0=np.concatenate([X0.ravel(), d0.ravel(), np.minimum(s0 / u_max, 1.0),
+                                    [case.tof, 0.0]]),
+                 lbx=lbx, ubx=ubx, lbg=lbg, ubg=ubg)
+    stats = solver.stats()
+    zs = np.asarray(res["x"]).ravel()
+    Uc = u_max * zs[iw:iw + 3 * N].reshape(N, 3) * zs[iw + 3 * N:iw + 4 * N, None]
+    mass = float(case.units.mass_kg(zs[iw - 1]))
+    return (mass, float(zs[n - 2]), str(stats["return_status"]), int(stats["iter_count"]),
+            time.process_time() - t0, Uc)

@@ -13,6 +13,7 @@ from datetime import datetime, timedelta, timezone
 import numpy as np
 
 from . import trajectory_output
+from .dynamics.units import DAY_S
 from .errors import DaddyError
 from .catalogue import list_cases, load_case, problem_from_case
 from .catalogue.revolutions import RevolutionSearch, search_revolutions
@@ -42,6 +43,9 @@ def _parser() -> argparse.ArgumentParser:
                    help="keep the whole trajectory, between the nodes too, at least KM from "
                         "the Moon (Earth-Moon cases) or the Sun (Earth-Mars); reported as the "
                         "minimum distance of the dense re-propagation")
+    s.add_argument("--free-tof", type=float, nargs=2, metavar=("LO", "HI"),
+                   help="the time of flight free in [LO, HI] days (Earth-Mars: Mars moves on "
+                        "its orbit to the arrival); a case file's problem.tof_window")
     s.add_argument("--json", metavar="FILE", help="write the solution as JSON")
     s.add_argument("--npz", metavar="FILE", help="write the solution as NPZ")
     s.add_argument("--csv", metavar="FILE", help="write the trajectory as CSV (node times, SI "
@@ -101,7 +105,8 @@ def main(argv=None) -> int:
         fuel = not args.energy and case.system != "double_integrator"
         if args.fuel:
             fuel = True
-        problem = problem_from_case(case, stages=args.stages, r_min_km=args.r_min_km)
+        problem = problem_from_case(case, stages=args.stages, r_min_km=args.r_min_km,
+                                    tof_window=args.free_tof)
         ddp = {} if args.globalization is None else {"globalization": args.globalization}
         opts = case_options(case, fuel, run=dict(time_budget_s=args.time_budget), ddp=ddp)
         if args.warm_start:
@@ -127,6 +132,10 @@ def main(argv=None) -> int:
     if trajectory_output.is_earth_centred(sol) and np.all(np.isfinite(sol.X)):
         sol.cartesian_miss = trajectory_output.cartesian_miss(sol, case.cartesian_rhs())
     _report(sol)
+    if sol.parameters and "tof" in sol.parameters:
+        T = sol.parameters["tof"]
+        print("  time of flight (free) " + (f"{T:.6f} (normalised)" if case.system ==
+              "double_integrator" else f"{float(case.units.time_s(T)) / DAY_S:.4f} d"))
     if args.json:
         sol.to_json(args.json)
     if args.npz:
@@ -153,7 +162,7 @@ def _solve_sail(case: SailCase, args) -> int:
         ("--energy", args.energy), ("--fuel", args.fuel), ("--no-polish", args.no_polish),
         ("--warm-start", args.warm_start), ("--stages", args.stages),
         ("--r-min-km", args.r_min_km), ("--search-revolutions", args.search_revolutions),
-        ("--npz", args.npz)) if given]
+        ("--npz", args.npz), ("--free-tof", args.free_tof)) if given]
     if refused:
         raise DaddyError(f"{', '.join(refused)}: not for a solar-sail case ({case.name!r} "
                          "maximises its semi-major axis from --guess; its revolutions are in the "

@@ -8,7 +8,7 @@ phi, and its control gains an increment v:
     z = [x, omega, phi],   w = [u, v],   z0 = [x0, guess, 1]
     omega+ = omega + phi * scale * v      (the parameters move on stage 0 only)
     phi+ = 0,                             (1 - phi) v = 0   (a stage equality: v idle after)
-    lower <= omega+ <= upper              (a stage inequality)
+    lower <= omega+ <= upper              (a stage-0 inequality: phi (bound rows) - (1 - phi))
 
 Every stage runs the user's functions with omega+: the parameters' sensitivities reach the
 backward sweep through the state, as HDDP's omega border does. Because the result is an
@@ -34,7 +34,7 @@ Two views of the user's problem:
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass, replace
+from dataclasses import dataclass, field, replace
 from typing import Callable
 
 import numpy as np
@@ -85,6 +85,9 @@ class ParameterLayout:
     nu: int
     params: tuple
     report: Callable | None = None   # raw values {name: omega} -> what the user set bounds on
+    base: Problem | None = field(default=None, compare=False, repr=False)   # the user's problem
+    # base-like problem -> the same augmentation of it (e.g. of ``throttle``'s exact fuel form)
+    rebuild: Callable | None = field(default=None, compare=False, repr=False)
 
     @property
     def n(self) -> int:
@@ -116,9 +119,18 @@ def with_parameters(problem: Problem, params) -> Problem:
 
 
 def with_free_time(problem: Problem, lower: float, upper: float, guess: float | None = None,
-                   time_cost: float = 0.0, name: str = "tof") -> Problem:
+                   time_cost: float = 0.0, name: str = "tof",
+                   target: Callable | None = None) -> Problem:
     """``problem`` with its time of flight free in [lower, upper] (normalised time, as
-    ``stage_dt``); ``time_cost`` c adds c T to the terminal cost (module docstring)."""
+    ``stage_dt``); ``time_cost`` c adds c T to the terminal cost (module docstring).
+
+    ``target(T, x_target)``: a target that moves, e.g. a planet to rendezvous with: its state at
+    the arrival time T (a float or a DA scalar, normalised) given the problem's ``x_target``
+    (nx,) -- the target's state at T_ref, the problem's own time of flight. The terminal cost
+    and constraints receive it in place of ``x_target``; written for floats and DA
+    (``dynamics.kepler.kepler_flow`` moves a body on its orbit). Default: a fixed target."""
+    if target is not None and not callable(target):
+        raise DaddyError(f"target must be a function target(T, x_target), got {target!r}")
     if problem.time_index is not None:
         raise DaddyError("with_free_time: this problem is staged in an angle (time_index is "
                          "set); its free time is a free arrival angle, not built yet")
@@ -143,8 +155,8 @@ def with_free_time(problem: Problem, lower: float, upper: float, guess: float | 
 
     def report(raw):
         return {name: reference * math.exp(raw[name])}
-    return _augmented(problem, _checked([param]), _TimeView(reference, float(time_cost)),
-                      report)
+    return _augmented(problem, _checked([param]),
+                      _TimeView(reference, float(time_cost), target), report)
 
 
 def _checked(params) -> tuple:
@@ -173,6 +185,9 @@ class _ParameterView:
     def terminal(self, cost, x, omega, x_target):
         return cost(dm.concatenate([x, omega]), x_target)
 
+    def target(self, x_target, omega):
+        return x_target
+
 
 @dataclass(frozen=True)
 class _TimeView:
@@ -181,6 +196,7 @@ class _TimeView:
 
     reference: float
     time_cost: float
+    moving: Callable | None = None     # target(T, x_target) (``with_free_time``)
 
     def state(self, x, omega):
         return x
@@ -192,7 +208,14 @@ class _TimeView:
         return dm.stack(list(rhs(t, y[:nx], u))) * dm.exp(y[nx])
 
     def terminal(self, cost, x, omega, x_target):
-        return cost(x, x_target) + (self.time_cost * self.reference) * dm.exp(omega[0])
+        return (cost(x, self.target(x_target, omega))
+                + (self.time_cost * self.reference) * dm.exp(omega[0]))
+
+    def target(self, x_target, omega):
+        """The target at the arrival time T = reference exp(theta)."""
+        if self.moving is None:
+            return x_target
+        return self.moving(self.reference * dm.exp(omega[0]), x_target)
 
 
 # --------------------------------------------------------------------------- augmentation
@@ -200,7 +223,8 @@ def _augmented(p: Problem, params: tuple, view, report: Callable | None = None) 
     if p.g_path is not None:
         raise DaddyError("static parameters with a path constraint (g_path) are not built yet")
     nx, nu, n = p.nx, p.nu, len(params)
-    lay = ParameterLayout(nx, nu, params, report)
+    lay = ParameterLayout(nx, nu, params, report, p,
+                          lambda q: _augmented(q, params, view, report))
     scale = np.array([q.scale for q in params])
     lower = np.array([q.lower for q in params])
     upper = np.array([q.upper for q in params])
@@ -230,9 +254,15 @@ def _augmented(p: Problem, params: tuple, view, report: Callable | None = None) 
         return dm.concatenate([fn(view.state(x, omega), u, view.duration(dt, omega)), mine])
 
     def g_ineq(z, w, dt):
-        _, omega, _, _, _ = parts(z, w)
-        rows = [(lower[i] - omega[i]) * (1.0 / scale[i]) for i in range(n)]
-        rows += [(omega[i] - upper[i]) * (1.0 / scale[i]) for i in range(n)]
+        # the bounds bind on stage 0, where the parameters are set; on later stages the rows
+        # read -1 (inactive): the same bound repeated on every stage of a parameter that does
+        # not change would make N dependent rows, and a bound at its limit a degenerate vertex
+        # for the multipliers (the optimality measure's, the KKT polish's)
+        _, omega, phi, _, _ = parts(z, w)
+        rows = [phi * ((lower[i] - omega[i]) * (1.0 / scale[i])) - (1.0 - phi)
+                for i in range(n)]
+        rows += [phi * ((omega[i] - upper[i]) * (1.0 / scale[i])) - (1.0 - phi)
+                 for i in range(n)]
         return with_user_rows(p.g_ineq, z, w, dt, dm.stack(rows))
 
     def g_eq(z, w, dt):
@@ -242,7 +272,8 @@ def _augmented(p: Problem, params: tuple, view, report: Callable | None = None) 
     def terminal(fn):
         if fn is None:
             return None
-        return lambda z, x_target: fn(view.state(z[:nx], z[nx:nx + n]), x_target[:nx])
+        return lambda z, x_target: fn(view.state(z[:nx], z[nx:nx + n]),
+                                      view.target(x_target[:nx], z[nx:nx + n]))
 
     def terminal_cost(z, x_target):
         return view.terminal(p.terminal_cost, z[:nx], z[nx:nx + n], x_target[:nx])

@@ -63,17 +63,19 @@ class ThrottleForm:
     throttle_row: int
 
     def controls(self, U: np.ndarray) -> np.ndarray:
-        """(N, 3) thrust -> (N, 3) [s, alpha, beta] (alpha = beta = 0 at zero thrust)."""
-        norm = np.linalg.norm(U, axis=1)
-        local = (U @ self.frame) / np.where(norm > 0, norm, 1.0)[:, None]
+        """(N, 3 + k) thrust -> (N, 3 + k) [s, alpha, beta] (alpha = beta = 0 at zero thrust);
+        k further columns (a static-parameter problem's increments) pass unchanged."""
+        T = U[:, :3]
+        norm = np.linalg.norm(T, axis=1)
+        local = (T @ self.frame) / np.where(norm > 0, norm, 1.0)[:, None]
         return np.column_stack([norm / self.u_max, np.arctan2(local[:, 2], local[:, 1]),
-                                np.arcsin(np.clip(local[:, 0], -1.0, 1.0))])
+                                np.arcsin(np.clip(local[:, 0], -1.0, 1.0)), U[:, 3:]])
 
     def thrust(self, V: np.ndarray) -> np.ndarray:
-        """(N, 3) [s, alpha, beta] -> (N, 3) thrust; a throttle below zero (by the polishing's
-        tolerance at most) is zero thrust."""
-        V = np.column_stack([np.maximum(V[:, 0], 0.0), V[:, 1:]])
-        return np.asarray(self._thrust(V.T), float)[:3].T
+        """(N, 3 + k) [s, alpha, beta] -> (N, 3 + k) thrust; a throttle below zero (by the
+        polishing's tolerance at most) is zero thrust; further columns pass unchanged."""
+        S = np.column_stack([np.maximum(V[:, 0], 0.0), V[:, 1:3]])
+        return np.column_stack([np.asarray(self._thrust(S.T), float)[:3].T, V[:, 3:]])
 
     def stage_duals(self, lam: np.ndarray) -> np.ndarray:
         """Stage multipliers in the form's rows (n_c + 1, N) -> the original's (n_c, N)."""
@@ -100,7 +102,10 @@ def intermediate_stages(U: np.ndarray, u_max: float, tol: float = 1e-3) -> int:
 
 
 def has_throttle_form(problem: Problem) -> bool:
-    """``problem`` has what the exact fuel form needs (module docstring)."""
+    """``problem`` has what the exact fuel form needs (module docstring); a static-parameter
+    problem (``static_parameters``) when the user's problem has."""
+    if _parameter_layout(problem) is not None:
+        return has_throttle_form(problem.parameters.base)
     step = problem.step
     return bool(problem.nu == 3 and problem.u_max
                 and isinstance(problem.stage_cost, FuelStageCost) and isinstance(step, FlowStep)
@@ -112,6 +117,10 @@ def throttle_form(problem: Problem, U: np.ndarray) -> ThrottleForm | None:
     controls U (N, 3) use least; None when the problem does not have what the form needs."""
     if not has_throttle_form(problem):
         return None
+    lay = _parameter_layout(problem)
+    if lay is not None:   # the form of the user's problem, augmented as the problem was
+        form = throttle_form(lay.base, U[:, :lay.nu])
+        return dataclasses.replace(form, problem=lay.rebuild(form.problem))
     step = problem.step
     u_max = float(problem.u_max)
     norm = np.linalg.norm(U, axis=1)
@@ -145,6 +154,13 @@ def throttle_form(problem: Problem, U: np.ndarray) -> ThrottleForm | None:
         g_path=problem.g_path and (lambda x, v: problem.g_path(x, thrust(v))),
         u_max=None, labels=labels)
     return dataclasses.replace(form, problem=fuel)
+
+
+def _parameter_layout(problem: Problem):
+    """A static-parameter problem's ``ParameterLayout`` when it can rebuild its augmentation
+    around another form of the user's problem, else None."""
+    lay = problem.parameters
+    return lay if lay is not None and lay.rebuild is not None else None
 
 
 def _rows(problem: Problem, U: np.ndarray) -> int:

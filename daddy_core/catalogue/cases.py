@@ -37,7 +37,7 @@ from .edelbaum import check_reachable
 CASES_DIR = Path(__file__).with_name("cases")
 SYSTEMS = tuple(SYSTEM_UNITS)
 STATE_UNITS = ("normalized", "km_km_s", "keplerian_km_deg")
-PROBLEM_KEYS = ("stage_cost_gain", "terminal_cost_gain", "integrator_tol")
+PROBLEM_KEYS = ("stage_cost_gain", "terminal_cost_gain", "integrator_tol", "tof_window")
 # a case's solver section: the paper's per-case settings (``solver.case_options``), no others
 SOLVER_KEYS = ("tol_ddp", "tol_aul", "tol_newton", "rho_max", "homotopy", "u_guess_n")
 HOMOTOPY_KEYS = ("h", "delta")

@@ -12,6 +12,7 @@ from ..da import functions as dm
 from ..errors import DaddyError
 from ..fuel import FuelStageCost, pseudo_huber_stage_cost
 from ..problem import Problem, flow_step
+from . import free_time
 from .cases import Case
 
 
@@ -96,14 +97,18 @@ def keep_out(units, r_min_km: float):
 
 def problem_from_case(case: Case, integrator: str = "rk78", integrator_tol: float | None = None,
                       stages: int | None = None, max_thrust_n: float | None = None,
-                      r_min_km: float | None = None) -> Problem:
+                      r_min_km: float | None = None, tof_window=None) -> Problem:
     """Build the paper's problem for a catalogue ``Case`` (costs, constraints, units).
 
     ``max_thrust_n`` overrides the spacecraft's thrust bound (e.g. a derated bound that leaves
     guidance a control margin); the cost scaling keeps the spacecraft's rating. ``r_min_km``
     (or the case's ``problem.r_min_km``; the argument wins) keeps the whole trajectory that
     far from the Moon (Earth-Moon CR3BP) or the Sun (heliocentric): ``keep_out``.
+    ``tof_window`` [lower, upper] (or the case's ``problem.tof_window``; the argument wins), in
+    the case's time unit: the time of flight free in it, the target moving on to the arrival
+    (``free_time``).
     """
+    window = free_time.window_of(case, tof_window)
     s = case.problem
     dt = case.stage_lengths(stages)
     N = dt.size
@@ -117,9 +122,10 @@ def problem_from_case(case: Case, integrator: str = "rk78", integrator_tol: floa
             e = x[:3] - xt[:3]
             return dm.dot(e, e)
 
-        return Problem(name=case.name, x0=case.x0, x_target=case.x_target, stage_dt=dt, step=step,
-                       stage_cost=stage_cost, terminal_cost=terminal_cost,
-                       g_teq=lambda x, xt: x[:3] - xt[:3], units=case.units)
+        return _free(case, Problem(
+            name=case.name, x0=case.x0, x_target=case.x_target, stage_dt=dt, step=step,
+            stage_cost=stage_cost, terminal_cost=terminal_cost,
+            g_teq=lambda x, xt: x[:3] - xt[:3], units=case.units), window)
 
     sc = case.spacecraft
     units = case.units
@@ -143,10 +149,16 @@ def problem_from_case(case: Case, integrator: str = "rk78", integrator_tol: floa
 
     r_min_km = s.get("r_min_km") if r_min_km is None else r_min_km
     g_path = None if r_min_km is None else keep_out(units, r_min_km)
-    return Problem(name=case.name, x0=case.x0, x_target=case.x_target, stage_dt=dt,
-                   g_path=g_path, step=flow_step(rhs, integrator, tol), stage_cost=stage_cost,
-                   terminal_cost=terminal_cost, g_ineq=g_ineq,
-                   g_teq=miss, units=units, spacecraft=sc, u_max=u_bound, mass_index=6, rhs=rhs,
-                   t_start=case.t_start, time_index=5 if case.staged_in_angle else None,
-                   labels={"g_ineq": ("thrust bound", "dry mass"), "g_path": ("keep-out",),
-                           "g_teq": (ORBIT_LABELS if case.staged_in_angle else CARTESIAN_LABELS)})
+    problem = Problem(
+        name=case.name, x0=case.x0, x_target=case.x_target, stage_dt=dt, g_path=g_path,
+        step=flow_step(rhs, integrator, tol), stage_cost=stage_cost, terminal_cost=terminal_cost,
+        g_ineq=g_ineq, g_teq=miss, units=units, spacecraft=sc, u_max=u_bound, mass_index=6,
+        rhs=rhs, t_start=case.t_start, time_index=5 if case.staged_in_angle else None,
+        labels={"g_ineq": ("thrust bound", "dry mass"), "g_path": ("keep-out",),
+                "g_teq": (ORBIT_LABELS if case.staged_in_angle else CARTESIAN_LABELS)})
+    return _free(case, problem, window)
+
+
+def _free(case: Case, problem: Problem, window) -> Problem:
+    """``problem``, its time of flight free in ``window`` where one is set."""
+    return problem if window is None else free_time.with_free_tof(case, problem, window)

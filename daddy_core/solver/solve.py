@@ -11,7 +11,6 @@ Each step lives in its own module; this one only chains them.
 """
 from __future__ import annotations
 
-from dataclasses import replace
 
 import numpy as np
 
@@ -49,14 +48,19 @@ def solve(problem: Problem, u_guess=None, method: Method | str = Method.DYN,
         a ``Solution``. A solve that fails returns ``converged=False`` with the reason and the
         best feasible-so-far iterate (never NaN).
     """
-    if problem.parameters is not None:   # static parameters (``static_parameters``)
-        layout = problem.parameters
-        guess = u_guess if u_guess is None or isinstance(u_guess, (Solution, WarmStart)) \
-            else layout.padded(u_guess)
-        sol = solve(replace(problem, parameters=None), guess, method, fuel_optimal, polish,
-                    options, case_name, progress)
+    layout = problem.parameters
+    if layout is not None:   # static parameters (``static_parameters``): the user's guess padded
+        if not (u_guess is None or isinstance(u_guess, (Solution, WarmStart))):
+            u_guess = layout.padded(u_guess)
+    sol = _solve(problem, u_guess, method, fuel_optimal, polish, options, case_name, progress)
+    if layout is not None:
         sol.parameters = layout.values(sol.X)
-        return sol
+    return sol
+
+
+def _solve(problem: Problem, u_guess, method, fuel_optimal, polish, options, case_name,
+           progress) -> Solution:
+    """``solve`` (its arguments) once the guess has the problem's shape."""
     opts = options or SolverOptions()
     method = Method.parse(method)
     if progress is None and opts.run.verbose:
