@@ -120,7 +120,7 @@ def with_parameters(problem: Problem, params) -> Problem:
 
 def with_free_time(problem: Problem, lower: float, upper: float, guess: float | None = None,
                    time_cost: float = 0.0, name: str = "tof",
-                   target: Callable | None = None) -> Problem:
+                   target: Callable | None = None, scale: float = 1.0) -> Problem:
     """``problem`` with its time of flight free in [lower, upper] (normalised time, as
     ``stage_dt``); ``time_cost`` c adds c T to the terminal cost (module docstring).
 
@@ -128,7 +128,10 @@ def with_free_time(problem: Problem, lower: float, upper: float, guess: float | 
     the arrival time T (a float or a DA scalar, normalised) given the problem's ``x_target``
     (nx,) -- the target's state at T_ref, the problem's own time of flight. The terminal cost
     and constraints receive it in place of ``x_target``; written for floats and DA
-    (``dynamics.kepler.kepler_flow`` moves a body on its orbit). Default: a fixed target."""
+    (``dynamics.kepler.kepler_flow`` moves a body on its orbit). Default: a fixed target.
+
+    ``scale``: the ``StaticParameter`` scale of theta = ln(T / T_ref) (docs/parameters.md
+    measures its effect on Earth-Mars)."""
     if target is not None and not callable(target):
         raise DaddyError(f"target must be a function target(T, x_target), got {target!r}")
     if problem.time_index is not None:
@@ -151,7 +154,7 @@ def with_free_time(problem: Problem, lower: float, upper: float, guess: float | 
     # iterate can make the durations -- and a cost such as sum u^2 dt -- negative
     def log(t):
         return math.log(t / reference)
-    param = StaticParameter(name, log(lower), log(upper), log(guess), 1.0)
+    param = StaticParameter(name, log(lower), log(upper), log(guess), scale)
 
     def report(raw):
         return {name: reference * math.exp(raw[name])}
