@@ -11,7 +11,6 @@ Each step lives in its own module; this one only chains them.
 """
 from __future__ import annotations
 
-
 import numpy as np
 
 from ..path_constraints import violated_at_start
