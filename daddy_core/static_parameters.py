@@ -28,8 +28,9 @@ Two views of the user's problem:
   explicitly. ``time_cost`` adds c T to the terminal cost (c = 1 with a zero stage cost is
   minimum time).
 
-``solve`` pads a user's (N, nu) guess with idle increments and reports the values in
-``Solution.parameters``.
+``solve`` pads a user's (N, nu) guess with idle increments (a solution's: with the increments
+that set its parameters), and answers in the user's view: X (N+1, nx), U (N, nu), the stage
+lengths as flown, and the values in ``Solution.parameters``.
 """
 from __future__ import annotations
 
@@ -88,6 +89,8 @@ class ParameterLayout:
     base: Problem | None = field(default=None, compare=False, repr=False)   # the user's problem
     # base-like problem -> the same augmentation of it (e.g. of ``throttle``'s exact fuel form)
     rebuild: Callable | None = field(default=None, compare=False, repr=False)
+    view: object = field(default=None, compare=False, repr=False)   # how the user sees z
+    unreport: Callable | None = None   # ``report``'s inverse (warm starts from a solution)
 
     @property
     def n(self) -> int:
@@ -103,13 +106,28 @@ class ParameterLayout:
         raw = {p.name: float(X[-1, self.nx + i]) for i, p in enumerate(self.params)}
         return raw if self.report is None else self.report(raw)
 
-    def padded(self, U: np.ndarray) -> np.ndarray:
-        """A user's (N, nu) controls with the idle increments appended (N, nu + n); augmented
-        controls pass unchanged."""
+    def padded(self, U: np.ndarray, start: dict | None = None) -> np.ndarray:
+        """A user's (N, nu) controls with the increments appended (N, nu + n): idle, or with
+        ``start`` ({name: value}, as ``values`` reports them) the stage-0 increments that set
+        the parameters there; augmented controls pass unchanged."""
         U = np.asarray(U, float)
-        if U.ndim == 2 and U.shape[1] == self.nu:
-            return np.hstack([U, np.zeros((U.shape[0], self.n))])
-        return U
+        if not (U.ndim == 2 and U.shape[1] == self.nu):
+            return U
+        W = np.hstack([U, np.zeros((U.shape[0], self.n))])
+        if start is not None and U.shape[0] > 0:
+            raw = start if self.unreport is None else self.unreport(start)
+            for i, p in enumerate(self.params):
+                if p.name in raw:
+                    W[0, self.nu + i] = (min(max(raw[p.name], p.lower), p.upper)
+                                         - p.guess) / p.scale
+        return W
+
+    def user_view(self, X: np.ndarray, U: np.ndarray, stage_dt: np.ndarray) -> tuple:
+        """(X (N+1, nx), U (N, nu), the stage lengths as flown (N,)) of an augmented
+        trajectory: the user's columns, and a free time's scaled durations."""
+        omega = X[-1, self.nx:self.nx + self.n]
+        dt = np.asarray(self.view.duration(np.asarray(stage_dt, float), omega), float)
+        return X[:, :self.nx].copy(), U[:, :self.nu].copy(), dt
 
 
 def with_parameters(problem: Problem, params) -> Problem:
@@ -158,8 +176,11 @@ def with_free_time(problem: Problem, lower: float, upper: float, guess: float | 
 
     def report(raw):
         return {name: reference * math.exp(raw[name])}
+
+    def unreport(values):
+        return {name: log(values[name])} if values.get(name, 0) > 0 else {}
     return _augmented(problem, _checked([param]),
-                      _TimeView(reference, float(time_cost), target), report)
+                      _TimeView(reference, float(time_cost), target), report, unreport)
 
 
 def _checked(params) -> tuple:
@@ -222,12 +243,14 @@ class _TimeView:
 
 
 # --------------------------------------------------------------------------- augmentation
-def _augmented(p: Problem, params: tuple, view, report: Callable | None = None) -> Problem:
+def _augmented(p: Problem, params: tuple, view, report: Callable | None = None,
+               unreport: Callable | None = None) -> Problem:
     if p.g_path is not None:
         raise DaddyError("static parameters with a path constraint (g_path) are not built yet")
     nx, nu, n = p.nx, p.nu, len(params)
     lay = ParameterLayout(nx, nu, params, report, p,
-                          lambda q: _augmented(q, params, view, report))
+                          lambda q: _augmented(q, params, view, report, unreport), view,
+                          unreport)
     scale = np.array([q.scale for q in params])
     lower = np.array([q.lower for q in params])
     upper = np.array([q.upper for q in params])

@@ -17,7 +17,7 @@ from daddy_core.da import functions as dm
 from daddy_core.dynamics.kepler import kepler_flow
 from daddy_core.errors import DaddyError
 from daddy_core.problem import Problem
-from daddy_core.solver import SolverOptions, case_options, solve
+from daddy_core.solver import Solution, SolverOptions, case_options, solve
 from daddy_core.static_parameters import with_free_time
 
 R0, V0 = np.array([-1.1, 0.9, 0.05]), np.array([-0.45, -0.55, 0.01])
@@ -126,3 +126,23 @@ def test_a_system_without_a_target_motion_is_refused_by_name():
     with pytest.raises(DaddyError, match="target must be a function"):
         with_free_time(problem_from_case(load_case("double_integrator")), 1.0, 2.0,
                        target="mars")
+
+
+def test_a_free_time_solution_is_in_the_users_view_and_warm_starts_at_its_parameters():
+    p = Problem(name="drift", x0=np.zeros(2), x_target=np.array([5.0, DRIFT]),
+                stage_dt=np.full(N, 0.5), step=_stage,
+                stage_cost=lambda x, u, dt, hom=(0.0, 1.0): u[0] * u[0] * dt,
+                terminal_cost=lambda x, xt: 0.0 * x[0],
+                g_teq=lambda x, xt: dm.stack([x[0] - xt[0], x[1] - xt[1]]), nu=1)
+    free = with_free_time(p, 1.0, 20.0, time_cost=C, target=_target)
+    opts = SolverOptions(kkt=dict(tol=1e-9))
+    sol = solve(free, options=opts)
+    T = sol.parameters["tof"]
+    assert sol.X.shape == (N + 1, 2) and sol.U.shape == (N, 1)
+    assert abs(float(np.sum(sol.stage_dt)) - T) < 1e-12      # the stages as flown
+    again = solve(free, Solution.from_json(sol.to_json()), options=opts)
+    assert again.converged, again.reason
+    assert abs(again.parameters["tof"] - T) < 1e-8
+    # the warm start began at the solved time: its first rollout already arrives
+    start = free.rollout(free.parameters.padded(sol.U, sol.parameters))
+    assert abs(start[-1, 0] - (5.0 + DRIFT * (T - 6.0))) < 1e-6

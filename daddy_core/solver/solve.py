@@ -11,6 +11,8 @@ Each step lives in its own module; this one only chains them.
 """
 from __future__ import annotations
 
+from dataclasses import replace
+
 import numpy as np
 
 from ..path_constraints import violated_at_start
@@ -49,12 +51,31 @@ def solve(problem: Problem, u_guess=None, method: Method | str = Method.DYN,
     """
     layout = problem.parameters
     if layout is not None:   # static parameters (``static_parameters``): the user's guess padded
-        if not (u_guess is None or isinstance(u_guess, (Solution, WarmStart))):
-            u_guess = layout.padded(u_guess)
+        u_guess = _padded_guess(layout, u_guess)
     sol = _solve(problem, u_guess, method, fuel_optimal, polish, options, case_name, progress)
-    if layout is not None:
-        sol.parameters = layout.values(sol.X)
-    return sol
+    if layout is None:
+        return sol
+    sol.parameters = layout.values(sol.X)
+    if layout.view is None:   # phases: the augmented trajectory (``phases.phase_slices``)
+        return sol
+    X, U, dt = layout.user_view(sol.X, sol.U, sol.stage_dt)
+    a, b = sol.gains_a, sol.gains_b
+    return replace(sol, X=X, U=U, stage_dt=dt, stage_maps=None,
+                   gains_a=a[:, :layout.nu] if a.ndim == 2 else a,
+                   gains_b=b[:, :layout.nu, :layout.nx] if b.ndim == 3 else b)
+
+
+def _padded_guess(layout, guess):
+    """A guess for a static-parameter problem: a user's controls padded with idle increments;
+    a solution in the user's view padded with the increments that set its parameters (its
+    stage maps are the augmented problem's no more)."""
+    if guess is None or isinstance(guess, WarmStart):
+        return guess
+    if isinstance(guess, Solution):
+        if guess.U.ndim == 2 and guess.U.shape[1] == layout.nu:
+            return replace(guess, U=layout.padded(guess.U, guess.parameters), stage_maps=None)
+        return guess
+    return layout.padded(guess)
 
 
 def _solve(problem: Problem, u_guess, method, fuel_optimal, polish, options, case_name,
