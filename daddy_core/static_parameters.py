@@ -86,10 +86,10 @@ class ParameterLayout:
     nu: int
     params: tuple
     report: Callable | None = None   # raw values {name: omega} -> what the user set bounds on
-    base: Problem | None = field(default=None, compare=False, repr=False)   # the user's problem
-    # base-like problem -> the same augmentation of it (e.g. of ``throttle``'s exact fuel form)
-    rebuild: Callable | None = field(default=None, compare=False, repr=False)
-    view: object = field(default=None, compare=False, repr=False)   # how the user sees z
+    # with_parameters / with_free_time (None for phases): the user's problem and how its
+    # functions see the augmented state
+    base: Problem | None = field(default=None, compare=False, repr=False)
+    view: object = field(default=None, compare=False, repr=False)
     unreport: Callable | None = None   # ``report``'s inverse (warm starts from a solution)
 
     @property
@@ -121,6 +121,11 @@ class ParameterLayout:
                     W[0, self.nu + i] = (min(max(raw[p.name], p.lower), p.upper)
                                          - p.guess) / p.scale
         return W
+
+    def rebuild(self, problem: Problem) -> Problem:
+        """The same augmentation of another form of the user's problem (e.g. ``throttle``'s
+        exact fuel form); only for a layout with a ``base``."""
+        return _augmented(problem, self.params, self.view, self.report, self.unreport)
 
     def user_view(self, X: np.ndarray, U: np.ndarray, stage_dt: np.ndarray) -> tuple:
         """(X (N+1, nx), U (N, nu), the stage lengths as flown (N,)) of an augmented
@@ -248,9 +253,7 @@ def _augmented(p: Problem, params: tuple, view, report: Callable | None = None,
     if p.g_path is not None:
         raise DaddyError("static parameters with a path constraint (g_path) are not built yet")
     nx, nu, n = p.nx, p.nu, len(params)
-    lay = ParameterLayout(nx, nu, params, report, p,
-                          lambda q: _augmented(q, params, view, report, unreport), view,
-                          unreport)
+    lay = ParameterLayout(nx, nu, params, report, p, view, unreport)
     scale = np.array([q.scale for q in params])
     lower = np.array([q.lower for q in params])
     upper = np.array([q.upper for q in params])

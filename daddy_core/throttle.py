@@ -160,7 +160,7 @@ def _parameter_layout(problem: Problem):
     """A static-parameter problem's ``ParameterLayout`` when it can rebuild its augmentation
     around another form of the user's problem, else None."""
     lay = problem.parameters
-    return lay if lay is not None and lay.rebuild is not None else None
+    return lay if lay is not None and lay.base is not None else None
 
 
 def _rows(problem: Problem, U: np.ndarray) -> int:

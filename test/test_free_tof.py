@@ -54,6 +54,15 @@ def _target(T, xt):           # a body drifting at DRIFT, at xt at T = 6
     return dm.stack([xt[0] + xt[1] * (T - 6.0), xt[1] + 0.0 * T])
 
 
+def _drift_problem() -> Problem:
+    """Rest to the drifting target at 5 (at T = 6), J = sum u^2 dt (+ C T once free)."""
+    return Problem(name="drift", x0=np.zeros(2), x_target=np.array([5.0, DRIFT]),
+                   stage_dt=np.full(N, 0.5), step=_stage,
+                   stage_cost=lambda x, u, dt, hom=(0.0, 1.0): u[0] * u[0] * dt,
+                   terminal_cost=lambda x, xt: 0.0 * x[0],
+                   g_teq=lambda x, xt: dm.stack([x[0] - xt[0], x[1] - xt[1]]), nu=1)
+
+
 def _least_norm(T):
     """min sum u^2 dt over N ZOH stages of T / N from rest to the target at T, + C T."""
     dt = T / N
@@ -66,11 +75,7 @@ def _least_norm(T):
 
 
 def test_a_drifting_rendezvous_with_free_time_is_the_one_dimensional_optimum():
-    p = Problem(name="drift", x0=np.zeros(2), x_target=np.array([5.0, DRIFT]),
-                stage_dt=np.full(N, 0.5), step=_stage,
-                stage_cost=lambda x, u, dt, hom=(0.0, 1.0): u[0] * u[0] * dt,
-                terminal_cost=lambda x, xt: 0.0 * x[0],
-                g_teq=lambda x, xt: dm.stack([x[0] - xt[0], x[1] - xt[1]]), nu=1)
+    p = _drift_problem()
     sol = solve(with_free_time(p, 1.0, 20.0, time_cost=C, target=_target),
                 options=SolverOptions(kkt=dict(tol=1e-9)))
     ref = minimize_scalar(_least_norm, bounds=(1.0, 20.0), method="bounded",
@@ -129,11 +134,7 @@ def test_a_system_without_a_target_motion_is_refused_by_name():
 
 
 def test_a_free_time_solution_is_in_the_users_view_and_warm_starts_at_its_parameters():
-    p = Problem(name="drift", x0=np.zeros(2), x_target=np.array([5.0, DRIFT]),
-                stage_dt=np.full(N, 0.5), step=_stage,
-                stage_cost=lambda x, u, dt, hom=(0.0, 1.0): u[0] * u[0] * dt,
-                terminal_cost=lambda x, xt: 0.0 * x[0],
-                g_teq=lambda x, xt: dm.stack([x[0] - xt[0], x[1] - xt[1]]), nu=1)
+    p = _drift_problem()
     free = with_free_time(p, 1.0, 20.0, time_cost=C, target=_target)
     opts = SolverOptions(kkt=dict(tol=1e-9))
     sol = solve(free, options=opts)

@@ -56,7 +56,7 @@ def solve(problem: Problem, u_guess=None, method: Method | str = Method.DYN,
     if layout is None:
         return sol
     sol.parameters = layout.values(sol.X)
-    if layout.view is None:   # phases: the augmented trajectory (``phases.phase_slices``)
+    if layout.base is None:   # phases: the augmented trajectory (``phases.phase_slices``)
         return sol
     X, U, dt = layout.user_view(sol.X, sol.U, sol.stage_dt)
     a, b = sol.gains_a, sol.gains_b
