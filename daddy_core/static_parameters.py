@@ -154,7 +154,7 @@ def with_free_time(problem: Problem, lower: float, upper: float, guess: float | 
     (``dynamics.kepler.kepler_flow`` moves a body on its orbit). Default: a fixed target.
 
     ``scale``: the ``StaticParameter`` scale of theta = ln(T / T_ref) (docs/parameters.md
-    measures its effect on Earth-Mars)."""
+    measures its effect on Earth-Mars and on minimum time)."""
     if target is not None and not callable(target):
         raise DaddyError(f"target must be a function target(T, x_target), got {target!r}")
     if problem.time_index is not None:
@@ -209,7 +209,8 @@ class _ParameterView:
         return dt
 
     def rates(self, rhs, t, y, u, nx):
-        return dm.stack(list(rhs(t, y, u)))
+        dx = rhs(t, y, u)
+        return dx if type(dx) is list else dm.stack(list(dx))
 
     def terminal(self, cost, x, omega, x_target):
         return cost(dm.concatenate([x, omega]), x_target)
@@ -234,7 +235,11 @@ class _TimeView:
         return dt * dm.exp(omega[0])
 
     def rates(self, rhs, t, y, u, nx):
-        return dm.stack(list(rhs(t, y[:nx], u))) * dm.exp(y[nx])
+        dx = rhs(t, y[:nx], u)
+        if type(y) is list:   # a single float state as a list (Dynamics.scalar_components)
+            e = math.exp(y[nx])
+            return [float(d) * e for d in dx]
+        return dm.stack(list(dx)) * dm.exp(y[nx])
 
     def terminal(self, cost, x, omega, x_target):
         return (cost(x, self.target(x_target, omega))
@@ -329,9 +334,11 @@ def _inner_step(p: Problem, view, nx: int, n: int) -> Callable:
 
         def rates(t, y, u):   # u arrives prepared (the user's prepare_control, once a stage)
             dx = view.rates(user.f, t, y, u, nx)
+            if type(dx) is list:   # floats: the list the scalar-component integrators unpack
+                return dx + [0.0] * n
             return dm.concatenate([dx, 0.0 * y[nx:nx + n]])
-        return FlowStep(Dynamics(rates, prepare_control=user.prepare_control,
-                                 max_step=user.max_step),
+        return FlowStep(Dynamics(rates, scalar_components=user.scalar_components,
+                                 prepare_control=user.prepare_control, max_step=user.max_step),
                         p.step.integrator, p.step.tol, p.step.rk4_steps, p.step.derivative_tol)
 
     def plain(y, u, dt, t0=0.0):
