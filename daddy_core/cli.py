@@ -136,6 +136,8 @@ def main(argv=None) -> int:
         T = sol.parameters["tof"]
         print("  time of flight (free) " + (f"{T:.6f} (normalised)" if case.system ==
               "double_integrator" else f"{float(case.units.time_s(T)) / DAY_S:.4f} d"))
+    for ph in sol.phases or ():
+        _report_phase(ph)
     if args.json:
         sol.to_json(args.json)
     if args.npz:
@@ -152,6 +154,17 @@ def main(argv=None) -> int:
         print(f"daddy: not converged: {sol.reason}", file=sys.stderr)
         return 1
     return 0
+
+
+def _report_phase(ph: dict) -> None:
+    """One line per phase of a multi-phase solution (``Solution.phases``)."""
+    last = ph["first_stage"] + len(ph["U"]) - 1
+    values = ", ".join(f"{k} {v:.9g}" for k, v in ph["parameters"].items())
+    link = ph["link_multipliers"]
+    print(f"  phase {ph['name']}: stages {ph['first_stage']}-{last}"
+          + (f"; parameters {values}" if values else "")
+          + ("" if link is None else "; link multipliers "
+             + " ".join(f"{v:.9g}" for v in link)))
 
 
 def _solve_sail(case: SailCase, args) -> int:

@@ -97,7 +97,7 @@ def multi_phase(name: str, x0, x_target, phases, terminal_cost: Callable, nu: in
     n = len(params)
     N = [ph.N for ph in phases]
     first = np.cumsum([0] + N[:-1])                 # each phase's first stage
-    layout = ParameterLayout(nx, nu, params)
+    layout = ParameterLayout(nx, nu, params, phases=phases)
     scale = np.array([q.scale for q in params])
     lower = np.array([q.lower for q in params])
     upper = np.array([q.upper for q in params])
@@ -231,6 +231,29 @@ def link_multipliers(problem: Problem, phases, duals: dict) -> dict:
         if rows and lam.size:
             out[f"{ph.name}->{phases[i + 1].name}"] = lam[[n_ineq + j for j in rows],
                                                          edges[i + 1]]
+    return out
+
+
+def phase_report(problem: Problem, X: np.ndarray, U: np.ndarray, duals: dict) -> list[dict]:
+    """Each phase of a ``multi_phase`` problem's solution (augmented X (N+1, .), U (N, .)):
+    its name, first stage, its states X (N_i + 1, nx) from its own start (Gamma(omega), or the
+    previous phase's end) and controls U (N_i, nu), its parameters and the multipliers of its
+    link to the next phase (None without one); plain lists, as a solution's JSON holds them."""
+    layout = problem.parameters
+    nx, nu, phases = layout.nx, layout.nu, layout.phases
+    omega = X[-1, nx:nx + layout.n]
+    values = layout.values(X)
+    links = link_multipliers(problem, phases, duals)
+    out = []
+    for i, (ph, s) in enumerate(zip(phases, phase_slices(problem, phases))):
+        start = X[s.start, :nx] if ph.start is None or i == 0 else np.asarray(
+            dm.stack(list(ph.start(omega))), float)
+        lam = links.get(f"{ph.name}->{phases[i + 1].name}") if i + 1 < len(phases) else None
+        out.append({"name": ph.name, "first_stage": s.start,
+                    "X": np.vstack([start, X[s.start + 1:s.stop + 1, :nx]]).tolist(),
+                    "U": U[s, :nu].tolist(),
+                    "parameters": {q.name: values[q.name] for q in ph.params},
+                    "link_multipliers": None if lam is None else np.asarray(lam).tolist()})
     return out
 
 

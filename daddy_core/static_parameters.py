@@ -91,6 +91,7 @@ class ParameterLayout:
     base: Problem | None = field(default=None, compare=False, repr=False)
     view: object = field(default=None, compare=False, repr=False)
     unreport: Callable | None = None   # ``report``'s inverse (warm starts from a solution)
+    phases: tuple = field(default=(), compare=False, repr=False)   # multi_phase's ``Phase``s
 
     @property
     def n(self) -> int:

@@ -134,16 +134,36 @@ def csv_columns(sol) -> tuple[list[str], np.ndarray]:
 
 
 def write_csv(sol, path: str | Path) -> None:
-    """The trajectory as CSV (``csv_columns``; empty fields where a value does not exist)."""
-    write_rows(*csv_columns(sol), path)
+    """The trajectory as CSV (``csv_columns``; empty fields where a value does not exist); a
+    multi-phase solution phase by phase (``phase_rows``)."""
+    if sol.phases:
+        write_rows(*phase_rows(sol), path, index_columns=2)
+    else:
+        write_rows(*csv_columns(sol), path)
 
 
-def write_rows(header: list[str], rows: np.ndarray, path: str | Path) -> None:
-    """A CSV of ``rows`` (K, len(header)) whose first column is an integer index; empty
-    fields for NaN."""
+def phase_rows(sol) -> tuple[list[str], np.ndarray]:
+    """(header, rows) of a multi-phase solution (``Solution.phases``): for each phase its nodes
+    from its own start, [phase number, node k within the phase, x (nx), u (nu)], u empty on a
+    phase's last node."""
+    rows = []
+    for i, ph in enumerate(sol.phases):
+        X, U = np.asarray(ph["X"], float), np.asarray(ph["U"], float)
+        U = np.vstack([U, np.full((1, U.shape[1]), np.nan)])
+        rows += [np.concatenate([[i, k], X[k], U[k]]) for k in range(X.shape[0])]
+    rows = np.array(rows)
+    nx, nu = len(sol.phases[0]["X"][0]), len(sol.phases[0]["U"][0])
+    header = (["phase", "k"] + [f"x{j}" for j in range(nx)] + [f"u{j}" for j in range(nu)])
+    return header, rows
+
+
+def write_rows(header: list[str], rows: np.ndarray, path: str | Path,
+               index_columns: int = 1) -> None:
+    """A CSV of ``rows`` (K, len(header)) whose first ``index_columns`` are integer indices;
+    empty fields for NaN."""
     lines = [",".join(header)]
     for r in rows:
-        lines.append(",".join(str(int(r[0])) if j == 0 else ("" if math.isnan(v) else repr(float(v)))
+        lines.append(",".join(str(int(v)) if j < index_columns else ("" if math.isnan(v) else repr(float(v)))
                               for j, v in enumerate(r)))
     Path(path).write_text("\n".join(lines) + "\n")
 

@@ -19,7 +19,8 @@ SAIL_CASES = ("geo_sail_2d_3rev", "geo_sail_3rev", "acs3_3rev", "acs3_3rev_j2", 
 
 
 def test_all_cases_present_and_consistent():
-    assert set(EXPECTED) | {"double_integrator"} | set(SAIL_CASES) == set(list_cases())
+    assert (set(EXPECTED) | {"double_integrator", "two_phase_lq"} | set(SAIL_CASES)
+            == set(list_cases()))   # two_phase_lq: test_phased_cases.py
     for name, (tof_days, n) in EXPECTED.items():
         c = load_case(name)
         assert c.stages == n

@@ -37,7 +37,10 @@ from .edelbaum import check_reachable
 CASES_DIR = Path(__file__).with_name("cases")
 SYSTEMS = tuple(SYSTEM_UNITS)
 STATE_UNITS = ("normalized", "km_km_s", "keplerian_km_deg")
-PROBLEM_KEYS = ("stage_cost_gain", "terminal_cost_gain", "integrator_tol", "tof_window")
+PROBLEM_KEYS = ("stage_cost_gain", "terminal_cost_gain", "integrator_tol", "tof_window",
+                "terminal")
+# the double integrator's terminal condition (problem.terminal): the position, or every component
+DOUBLE_INTEGRATOR_TERMINAL = {"position": 3, "state": 6}
 # a case's solver section: the paper's per-case settings (``solver.case_options``), no others
 SOLVER_KEYS = ("tol_ddp", "tol_aul", "tol_newton", "rho_max", "homotopy", "u_guess_n")
 HOMOTOPY_KEYS = ("h", "delta")
@@ -45,7 +48,7 @@ SPACECRAFT_KEYS = ("wet_mass_kg", "dry_mass_kg", "max_thrust_n", "isp_s", "g0_m_
 # every top-level field a case file may have (which apply depends on its system)
 CASE_KEYS = ("name", "description", "source", "system", "state_units", "x0", "x_target",
              "tof_days", "stages", "stage_duration", "stages_per_revolution", "revolutions",
-             "perturbations", "spacecraft", "problem", "solver")
+             "perturbations", "spacecraft", "problem", "solver", "phases")
 # fields that are not case settings, and where they are set instead
 _SET_ELSEWHERE = {"r_min_km": "it is not a case setting: give it to problem_from_case(case, "
                               "r_min_km=...) or `daddy solve --r-min-km`",
@@ -77,6 +80,7 @@ class Case:
         t_start: the true longitude of x0 for Earth-centred cases [rad], else 0.
         perturbations: the forces beyond point-mass gravity and thrust (Earth-centred cases).
         stages_per_revolution: Earth-centred cases: the stage density (None otherwise).
+        phases: a multi-phase case's ``phased_cases.PhaseSpec``s (empty for one phase).
     """
 
     name: str
@@ -94,6 +98,7 @@ class Case:
     t_start: float = 0.0
     perturbations: frozenset = frozenset()
     stages_per_revolution: int | None = None
+    phases: tuple = ()
 
     @property
     def staged_in_angle(self) -> bool:
@@ -195,6 +200,9 @@ def load_thrust_case(name_or_path: str | Path) -> Case:
         raise DaddyError(f"case {case.name!r} is a solar-sail case (no thruster, no mass): the "
                          f"guidance node flies thrust cases; solve it with `daddy solve "
                          f"{case.name}`")
+    if case.phases:
+        raise DaddyError(f"case {case.name!r} has phases: the guidance node flies one-phase "
+                         f"thrust cases; solve it with `daddy solve {case.name}`")
     return case
 
 
@@ -229,7 +237,23 @@ def case_from_dict(d: dict) -> Case:
     state_units = d.get("state_units", "normalized")
     if state_units not in STATE_UNITS:
         raise DaddyError(f"case field 'state_units' must be one of {STATE_UNITS}, got {state_units!r}")
-    if system != "earth_equinoctial":
+    phases = ()
+    if "phases" in d:
+        from .phased_cases import phases_from_list
+        phases = phases_from_list(d["phases"], system)
+        for key in ("stages", "stage_duration"):
+            if key in d:
+                raise DaddyError(f"case field {key!r}: a phased case gives each phase's "
+                                 "'stages' and 'stage_duration' in 'phases'")
+    terminal = d.get("problem", {}).get("terminal")
+    if terminal is not None and (system != "double_integrator" or not isinstance(terminal, str)
+                                 or terminal not in DOUBLE_INTEGRATOR_TERMINAL):
+        raise DaddyError(f"case field 'problem.terminal' is for the double_integrator system, "
+                         f"one of {tuple(DOUBLE_INTEGRATOR_TERMINAL)}; got {terminal!r} "
+                         f"(system {system!r})")
+    if phases:
+        stages = sum(p.stages for p in phases)
+    elif system != "earth_equinoctial":
         stages = need("stages")
         if not (isinstance(stages, int) and stages >= 1):
             raise DaddyError(f"case field 'stages' must be a positive integer, got {stages!r}")
@@ -248,7 +272,11 @@ def case_from_dict(d: dict) -> Case:
     x0 = _vector(need("x0"), "x0", 6)
     xt = _vector(need("x_target"), "x_target", 6)
 
-    if system == "double_integrator":
+    if phases:
+        units = SYSTEM_UNITS[system]()
+        spacecraft = None
+        tof = sum(p.stages * p.stage_duration for p in phases)
+    elif system == "double_integrator":
         units = SYSTEM_UNITS[system]()
         spacecraft = None
         dur = d.get("stage_duration")
@@ -269,7 +297,8 @@ def case_from_dict(d: dict) -> Case:
         xt = np.append(_to_normalised(xt, state_units, units, "x_target"), m0)
     return Case(name=name, description=str(d.get("description", "")), system=system, units=units,
                 spacecraft=spacecraft, x0=x0, x_target=xt, tof=tof, stages=stages,
-                problem=dict(d.get("problem", {})), solver=dict(d.get("solver", {})))
+                problem=dict(d.get("problem", {})), solver=dict(d.get("solver", {})),
+                phases=phases)
 
 
 def _earth_case(d: dict, name: str, units: Units, spacecraft: Spacecraft, x0: np.ndarray,

@@ -6,14 +6,14 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass
 
-import numpy as np
 
 from ..da import functions as dm
 from ..errors import DaddyError
 from ..fuel import FuelStageCost, pseudo_huber_stage_cost
 from ..problem import Problem, flow_step
 from . import free_time
-from .cases import Case
+from .cases import DOUBLE_INTEGRATOR_TERMINAL, Case
+from .phased_cases import phased_problem
 
 
 def low_thrust_costs(residual, u_max: float, dt_avg: float, stage_gain: float,
@@ -114,18 +114,28 @@ def problem_from_case(case: Case, integrator: str = "rk78", integrator_tol: floa
     N = dt.size
     if case.system == "double_integrator":
         from ..dynamics.models import double_integrator_step as step
+        rows = DOUBLE_INTEGRATOR_TERMINAL[s.get("terminal", "position")]
 
         def stage_cost(x, u, d, hom=(0.0, 1.0)):
             return u[0] * u[0] + u[1] * u[1] + u[2] * u[2]
 
+        def miss(x, xt):   # the position, or every component (problem.terminal)
+            return x[:rows] - xt[:rows]
+
         def terminal_cost(x, xt):
-            e = x[:3] - xt[:3]
+            e = miss(x, xt)
             return dm.dot(e, e)
 
+        if case.phases:
+            if window is not None or stages is not None:
+                raise DaddyError(f"case {case.name!r} has phases: each phase's stages are in "
+                                 "its case file, and a free time of flight is not built for "
+                                 "phases (tof_window, stages)")
+            return phased_problem(case, stage_cost, terminal_cost, miss)
         return _free(case, Problem(
             name=case.name, x0=case.x0, x_target=case.x_target, stage_dt=dt, step=step,
-            stage_cost=stage_cost, terminal_cost=terminal_cost,
-            g_teq=lambda x, xt: x[:3] - xt[:3], units=case.units), window)
+            stage_cost=stage_cost, terminal_cost=terminal_cost, g_teq=miss,
+            units=case.units), window)
 
     sc = case.spacecraft
     units = case.units

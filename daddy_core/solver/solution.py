@@ -88,6 +88,7 @@ class Solution:
     # (``path_constraints.dense_margin``; >= 0: it holds between the nodes too); None otherwise
     min_path_margin: float | None = None
     parameters: dict | None = None   # static parameters {name: value} (``static_parameters``)
+    phases: list | None = None   # a multi-phase problem's phases (``phases.phase_report``)
     stage_maps: StageMaps | None = field(default=None, repr=False, compare=False)
 
     _ARRAYS = ("X", "U", "stage_dt", "gains_a", "gains_b")

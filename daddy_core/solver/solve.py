@@ -16,6 +16,7 @@ from dataclasses import replace
 import numpy as np
 
 from ..path_constraints import violated_at_start
+from ..phases import phase_report
 from ..problem import Problem
 from . import end_game, path_exchange
 from .assemble import repropagation_miss, solution, unsolved
@@ -56,7 +57,8 @@ def solve(problem: Problem, u_guess=None, method: Method | str = Method.DYN,
     if layout is None:
         return sol
     sol.parameters = layout.values(sol.X)
-    if layout.base is None:   # phases: the augmented trajectory (``phases.phase_slices``)
+    if layout.base is None:   # phases: the augmented trajectory, and each phase in the user's view
+        sol.phases = phase_report(problem, sol.X, sol.U, sol.duals)
         return sol
     X, U, dt = layout.user_view(sol.X, sol.U, sol.stage_dt)
     a, b = sol.gains_a, sol.gains_b
