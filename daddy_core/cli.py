@@ -7,6 +7,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import math
 import sys
 from datetime import datetime, timedelta, timezone
 
@@ -16,6 +17,7 @@ from . import trajectory_output
 from .dynamics.units import DAY_S
 from .errors import DaddyError
 from .catalogue import list_cases, load_case, problem_from_case
+from .catalogue.free_time import ANGLE
 from .catalogue.revolutions import RevolutionSearch, search_revolutions
 from .catalogue.sail_cases import (SAIL_METHOD, SailCase, SailGuess, sail_options, solve_sail,
                                    write_sail_csv)
@@ -46,6 +48,9 @@ def _parser() -> argparse.ArgumentParser:
     s.add_argument("--free-tof", type=float, nargs=2, metavar=("LO", "HI"),
                    help="the time of flight free in [LO, HI] days (Earth-Mars: Mars moves on "
                         "its orbit to the arrival); a case file's problem.tof_window")
+    s.add_argument("--free-revolutions", type=float, nargs=2, metavar=("LO", "HI"),
+                   help="Earth-centred cases: the arrival angle free in [LO, HI] revolutions, "
+                        "one solve (a case file's problem.revolutions_window)")
     s.add_argument("--json", metavar="FILE", help="write the solution as JSON")
     s.add_argument("--npz", metavar="FILE", help="write the solution as NPZ")
     s.add_argument("--csv", metavar="FILE", help="write the trajectory as CSV (node times, SI "
@@ -105,8 +110,12 @@ def main(argv=None) -> int:
         fuel = not args.energy and case.system != "double_integrator"
         if args.fuel:
             fuel = True
+        if args.search_revolutions and args.free_revolutions:
+            raise DaddyError("--search-revolutions and --free-revolutions: the search solves "
+                             "fixed angles; the free angle is one solve: give one of them")
         problem = problem_from_case(case, stages=args.stages, r_min_km=args.r_min_km,
-                                    tof_window=args.free_tof)
+                                    tof_window=args.free_tof,
+                                    revolutions_window=args.free_revolutions)
         ddp = {} if args.globalization is None else {"globalization": args.globalization}
         opts = case_options(case, fuel, run=dict(time_budget_s=args.time_budget), ddp=ddp)
         if args.warm_start:
@@ -136,6 +145,8 @@ def main(argv=None) -> int:
         T = sol.parameters["tof"]
         print("  time of flight (free) " + (f"{T:.6f} (normalised)" if case.system ==
               "double_integrator" else f"{float(case.units.time_s(T)) / DAY_S:.4f} d"))
+    if sol.parameters and ANGLE in sol.parameters:
+        print(f"  revolutions (free) {sol.parameters[ANGLE] / (2 * math.pi):.4f}")
     for ph in sol.phases or ():
         _report_phase(ph)
     if args.json:
@@ -175,7 +186,8 @@ def _solve_sail(case: SailCase, args) -> int:
         ("--energy", args.energy), ("--fuel", args.fuel), ("--no-polish", args.no_polish),
         ("--warm-start", args.warm_start), ("--stages", args.stages),
         ("--r-min-km", args.r_min_km), ("--search-revolutions", args.search_revolutions),
-        ("--npz", args.npz), ("--free-tof", args.free_tof)) if given]
+        ("--npz", args.npz), ("--free-tof", args.free_tof),
+        ("--free-revolutions", args.free_revolutions)) if given]
     if refused:
         raise DaddyError(f"{', '.join(refused)}: not for a solar-sail case ({case.name!r} "
                          "maximises its semi-major axis from --guess; its revolutions are in the "

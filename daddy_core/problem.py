@@ -34,17 +34,19 @@ class StageStep:
     start), on floats or DA: what the solver relies on, with the two ways it evaluates a step.
 
     Wraps a plain function f(x, u, dt) of an autonomous system (``Problem`` wraps any callable
-    given as ``step``; it does not see t0); ``FlowStep`` integrates a continuous right-hand side
+    given as ``step``; it does not see t0; the library's own wrappers of a step, e.g. the
+    static parameters', pass t0 on: ``takes_t0``); ``FlowStep`` integrates a continuous right-hand side
     rhs(t, x, u) from t0 and serves both ways faster. The stage start matters where the
     dynamics depend on the independent variable, e.g. the true longitude of Sundman-transformed
     Earth-centred stages (``models.equinoctial_sundman``).
     """
 
-    def __init__(self, fn: Callable):
+    def __init__(self, fn: Callable, takes_t0: bool = False):
         self.fn = fn
+        self.takes_t0 = takes_t0   # fn(x, u, dt, t0): a step of the library's that passes t0 on
 
     def __call__(self, x, u, dt, t0=0.0):
-        return self.fn(x, u, dt)
+        return self.fn(x, u, dt, t0) if self.takes_t0 else self.fn(x, u, dt)
 
     def flow(self, x: np.ndarray, u: np.ndarray, dt: float, t0: float = 0.0) -> np.ndarray:
         """One float state (nx,) after a stage of length dt from t0 under u (nu,)."""

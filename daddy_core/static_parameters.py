@@ -24,9 +24,11 @@ Two views of the user's problem:
 - ``with_free_time(problem, lower, upper)``: the time of flight T is the parameter, and the
   user's functions are unchanged. Each stage's duration becomes dt T / T_ref (T_ref = the sum
   of ``stage_dt``): plain steps and stage costs receive the scaled dt, and a right-hand side is
-  scaled by T / T_ref over the same stage grid. The dynamics must not depend on time
-  explicitly. ``time_cost`` adds c T to the terminal cost (c = 1 with a zero stage cost is
-  minimum time).
+  scaled by T / T_ref over the same stage grid, its independent variable mapped to
+  t_start + (t - t_start) T / T_ref (so dynamics that depend on it explicitly fly the scaled
+  grid too). For a problem staged in an angle (``time_index`` set: the Earth-centred cases'
+  true longitude) the same parameter is the span of the angle, a free arrival angle.
+  ``time_cost`` adds c T to the terminal cost (c = 1 with a zero stage cost is minimum time).
 
 ``solve`` pads a user's (N, nu) guess with idle increments (a solution's: with the increments
 that set its parameters), and answers in the user's view: X (N+1, nx), U (N, nu), the stage
@@ -158,9 +160,6 @@ def with_free_time(problem: Problem, lower: float, upper: float, guess: float | 
     measures its effect on Earth-Mars and on minimum time)."""
     if target is not None and not callable(target):
         raise DaddyError(f"target must be a function target(T, x_target), got {target!r}")
-    if problem.time_index is not None:
-        raise DaddyError("with_free_time: this problem is staged in an angle (time_index is "
-                         "set); its free time is a free arrival angle, not built yet")
     if not (isinstance(time_cost, (int, float)) and math.isfinite(time_cost)):
         raise DaddyError(f"time_cost must be a finite number, got {time_cost!r}")
     if not lower > 0:
@@ -186,7 +185,8 @@ def with_free_time(problem: Problem, lower: float, upper: float, guess: float | 
     def unreport(values):
         return {name: log(values[name])} if values.get(name, 0) > 0 else {}
     return _augmented(problem, _checked([param]),
-                      _TimeView(reference, float(time_cost), target), report, unreport)
+                      _TimeView(reference, float(time_cost), target, problem.t_start), report,
+                      unreport)
 
 
 def _checked(params) -> tuple:
@@ -209,6 +209,9 @@ class _ParameterView:
     def duration(self, dt, omega):
         return dt
 
+    def independent(self, t, omega):
+        return t
+
     def rates(self, rhs, t, y, u, nx):
         dx = rhs(t, y, u)
         return dx if type(dx) is list else dm.stack(list(dx))
@@ -228,6 +231,7 @@ class _TimeView:
     reference: float
     time_cost: float
     moving: Callable | None = None     # target(T, x_target) (``with_free_time``)
+    origin: float = 0.0                # the problem's t_start: where the grid's scaling starts
 
     def state(self, x, omega):
         return x
@@ -235,12 +239,16 @@ class _TimeView:
     def duration(self, dt, omega):
         return dt * dm.exp(omega[0])
 
+    def independent(self, t, omega):
+        """The independent variable flown at the grid's t: origin + (t - origin) exp(theta)."""
+        return self.origin + (t - self.origin) * dm.exp(omega[0])
+
     def rates(self, rhs, t, y, u, nx):
-        dx = rhs(t, y[:nx], u)
         if type(y) is list:   # a single float state as a list (Dynamics.scalar_components)
             e = math.exp(y[nx])
-            return [float(d) * e for d in dx]
-        return dm.stack(list(dx)) * dm.exp(y[nx])
+            return [float(d) * e for d in rhs(self.origin + (t - self.origin) * e, y[:nx], u)]
+        e = dm.exp(y[nx])
+        return dm.stack(list(rhs(self.origin + (t - self.origin) * e, y[:nx], u))) * e
 
     def terminal(self, cost, x, omega, x_target):
         return (cost(x, self.target(x_target, omega))
@@ -321,7 +329,7 @@ def _augmented(p: Problem, params: tuple, view, report: Callable | None = None,
     guess = np.array([q.guess for q in params])
     return replace(p, x0=np.concatenate([p.x0, guess, [1.0]]),
                    x_target=np.concatenate([p.x_target, guess, [0.0]]),
-                   step=StageStep(step), stage_cost=stage_cost, terminal_cost=terminal_cost,
+                   step=StageStep(step, takes_t0=True), stage_cost=stage_cost, terminal_cost=terminal_cost,
                    g_ineq=g_ineq, g_eq=g_eq, g_tineq=terminal(p.g_tineq),
                    g_teq=terminal(p.g_teq), nu=nu + n, labels=labels, parameters=lay,
                    rhs=None)
@@ -343,6 +351,8 @@ def _inner_step(p: Problem, view, nx: int, n: int) -> Callable:
                         p.step.integrator, p.step.tol, p.step.rk4_steps, p.step.derivative_tol)
 
     def plain(y, u, dt, t0=0.0):
-        x1 = p.step(view.state(y[:nx], y[nx:nx + n]), u, view.duration(dt, y[nx:nx + n]), t0)
+        omega = y[nx:nx + n]
+        x1 = p.step(view.state(y[:nx], omega), u, view.duration(dt, omega),
+                    view.independent(t0, omega))
         return dm.concatenate([x1, y[nx:nx + n]])
     return plain

@@ -120,3 +120,25 @@ def test_a_static_parameter_of_an_lq_problem_is_its_kkt_solution():
 def test_bad_parameters_are_refused_by_name(make, field):
     with pytest.raises(DaddyError, match=field):
         make(_rest_to_rest(1.0, 4))
+
+
+def test_a_non_autonomous_flow_keeps_its_stage_starts_through_the_parameters():
+    """dx/dt = cos(t) + u from t_start = 1.3 (the rhs reads t): with a static parameter the
+    stages start where the problem's do, and with a free time at its reference the flow is the
+    problem's own; stretched by T / T_ref, the grid t_start + (t - t_start) T / T_ref is flown
+    (closed form: x(T) = sin(t_start + T) - sin(t_start) + u T)."""
+    from daddy_core.dynamics.rhs import Dynamics
+    N, t_start = 4, 1.3
+    rhs = Dynamics(lambda t, x, u: dm.stack([dm.cos(t) + u[0]]))
+    p = Problem(name="clock", x0=np.zeros(1), x_target=np.zeros(1), stage_dt=np.full(N, 0.5),
+                step=flow_step(rhs, "rk78", 1e-13), t_start=t_start,
+                stage_cost=lambda x, u, dt, hom=(0.0, 1.0): u[0] * u[0] * dt,
+                terminal_cost=lambda x, xt: x[0] * x[0], nu=1)
+    U = np.full((N, 1), 0.2)
+    exact = lambda T: math.sin(t_start + T) - math.sin(t_start) + 0.2 * T   # noqa: E731
+    assert p.rollout(U)[-1, 0] == pytest.approx(exact(2.0), abs=1e-10)
+    q = with_parameters(p, [StaticParameter("a", -1.0, 1.0, 0.0)])
+    assert q.rollout(q.parameters.padded(U))[-1, 0] == pytest.approx(exact(2.0), abs=1e-10)
+    for T in (2.0, 2.6):
+        f = with_free_time(p, 1.0, 4.0, guess=T)
+        assert f.rollout(f.parameters.padded(U))[-1, 0] == pytest.approx(exact(T), abs=1e-10)

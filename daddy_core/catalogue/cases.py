@@ -38,7 +38,7 @@ CASES_DIR = Path(__file__).with_name("cases")
 SYSTEMS = tuple(SYSTEM_UNITS)
 STATE_UNITS = ("normalized", "km_km_s", "keplerian_km_deg")
 PROBLEM_KEYS = ("stage_cost_gain", "terminal_cost_gain", "integrator_tol", "tof_window",
-                "terminal")
+                "revolutions_window", "terminal")
 # the double integrator's terminal condition (problem.terminal): the position, or every component
 DOUBLE_INTEGRATOR_TERMINAL = {"position": 3, "state": 6}
 # a case's solver section: the paper's per-case settings (``solver.case_options``), no others

@@ -97,7 +97,8 @@ def keep_out(units, r_min_km: float):
 
 def problem_from_case(case: Case, integrator: str = "rk78", integrator_tol: float | None = None,
                       stages: int | None = None, max_thrust_n: float | None = None,
-                      r_min_km: float | None = None, tof_window=None) -> Problem:
+                      r_min_km: float | None = None, tof_window=None,
+                      revolutions_window=None) -> Problem:
     """Build the paper's problem for a catalogue ``Case`` (costs, constraints, units).
 
     ``max_thrust_n`` overrides the spacecraft's thrust bound (e.g. a derated bound that leaves
@@ -106,9 +107,11 @@ def problem_from_case(case: Case, integrator: str = "rk78", integrator_tol: floa
     far from the Moon (Earth-Moon CR3BP) or the Sun (heliocentric): ``keep_out``.
     ``tof_window`` [lower, upper] (or the case's ``problem.tof_window``; the argument wins), in
     the case's time unit: the time of flight free in it, the target moving on to the arrival
-    (``free_time``).
+    (``free_time``). ``revolutions_window`` [lower, upper] (or ``problem.revolutions_window``):
+    an Earth-centred case's arrival angle free in it, in revolutions.
     """
     window = free_time.window_of(case, tof_window)
+    angles = free_time.revolutions_window_of(case, revolutions_window)
     s = case.problem
     dt = case.stage_lengths(stages)
     N = dt.size
@@ -166,6 +169,15 @@ def problem_from_case(case: Case, integrator: str = "rk78", integrator_tol: floa
         rhs=rhs, t_start=case.t_start, time_index=5 if case.staged_in_angle else None,
         labels={"g_ineq": ("thrust bound", "dry mass"), "g_path": ("keep-out",),
                 "g_teq": (ORBIT_LABELS if case.staged_in_angle else CARTESIAN_LABELS)})
+    if angles is not None:
+        if window is not None:
+            raise DaddyError(f"{free_time.FIELD} and {free_time.REVOLUTIONS_FIELD}: an "
+                             "Earth-centred case frees its arrival angle, not its time of "
+                             "flight; give the revolutions window only")
+        if stages is not None:
+            raise DaddyError("stages: a free arrival angle keeps the case's stage count (the "
+                             "stages stretch with the angle); give one or the other")
+        return free_time.with_free_revolutions(case, problem, angles)
     return _free(case, problem, window)
 
 
