@@ -5,6 +5,8 @@ variables, for a batch of expansion points (e.g. one flow map per trajectory sta
 """
 from __future__ import annotations
 
+import functools
+
 import numpy as np
 
 from ..errors import DaddyError
@@ -82,9 +84,21 @@ def compose(p: DA, g: DA) -> DA:
     mono[:, 0] = 0.0
     mono[0, 0] = 1.0
     mono[:, 1:T.n + 1] = g.c
+    sparse = _sparse_components(g.c, G)
     for d in range(2, T.k + 1):
         b = T.block[d]
-        mono[:, b] = _mul(mono[:, T.parent[b]], g.c[:, T.parent_var[b]], G)
+        if not sparse:
+            mono[:, b] = _mul(mono[:, T.parent[b]], g.c[:, T.parent_var[b]], G)
+            continue
+        cols = np.arange(b.start, b.stop)
+        dense = [v for v in range(T.n) if v not in sparse]
+        at = cols[np.isin(T.parent_var[b], dense)]
+        if at.size:
+            mono[:, at] = _mul(mono[:, T.parent[at]], g.c[:, T.parent_var[at]], G)
+        for v, nz in sparse.items():
+            at = cols[T.parent_var[b] == v]
+            if at.size:
+                mono[:, at] = _times_sparse(mono[:, T.parent[at]], g.c[:, v], nz, G)
     # out[q, *s] = sum_m p[m, *sp] * mono[q, m, *sg]
     pc = p.c
     sp, sg = pc.shape[1:], g.shape[1:]
@@ -94,6 +108,42 @@ def compose(p: DA, g: DA) -> DA:
     out = np.einsum("m...,qm...->q...", np.broadcast_to(pc, (T.size,) + shape),
                     np.broadcast_to(mono, mono.shape[:2] + shape), optimize=False)
     return DA(out, G)
+
+
+# a component of an inner map with at most this many nonzero coefficients (an identity
+# variable has one, a shifted one two) is multiplied monomial by monomial in ``compose``
+_SPARSE_TERMS = 3
+
+
+def _sparse_components(gc: np.ndarray, G: MonomialTables) -> dict:
+    """{component v: its nonzero monomials} of the inner map's coefficients gc (M, n, *s) for
+    the components with at most ``_SPARSE_TERMS`` of them (over the whole batch)."""
+    if G.k < 3:
+        return {}
+    nonzero = np.any(gc != 0.0, axis=tuple(range(2, gc.ndim))) if gc.ndim > 2 else gc != 0.0
+    counts = nonzero.sum(axis=0)
+    return {v: np.flatnonzero(nonzero[:, v]) for v in range(gc.shape[1])
+            if counts[v] <= _SPARSE_TERMS}
+
+
+def _times_sparse(a: np.ndarray, b: np.ndarray, nz: np.ndarray, G: MonomialTables) -> np.ndarray:
+    """The truncated product of a (M, *sa) with b (M, *sb), b nonzero only on the monomials
+    ``nz``: the sum over them of b_q times a shifted by monomial q (``_shifts``)."""
+    shape = (G.size,) + np.broadcast_shapes(a.shape[1:], b.shape[1:])
+    out = np.zeros(shape)
+    for q in nz.tolist():
+        source, target = _shifts(G.n, G.k, q)
+        out[target] += a[source] * b[q]
+    return out
+
+
+@functools.lru_cache(maxsize=None)
+def _shifts(n: int, k: int, q: int) -> tuple:
+    """(source, target): monomial source times monomial q is monomial target (degree <= k)."""
+    from .monomials import tables
+    T = tables(n, k)
+    hit = T.pair_j == q
+    return T.pair_i[hit], T.pair_target[hit]
 
 
 def shift(p: DA, dv) -> DA:

@@ -1,0 +1,222 @@
+"""Polynomial feedback laws (issue 47): at a converged solution, the optimal control of each
+stage as a polynomial of order k - 1 in the state's deviation, delta u*_k(delta x), from the
+DA-HDDP backward sweep on polynomials (Maestrini et al., sec. III).
+
+The sweep works in one algebra of n = nx + nu + nl variables z = [dx, du, dl] (dl: the
+terminal multipliers' deviation from the solution's), order k:
+
+    V_N(dx, dl)      = phi(x_N + dx) + (l + dl)^T psi(x_N + dx)
+    Q_k(dx, du, dl)  = L_k(x_k + dx, u_k + du) + V_{k+1}(f_k(x_k + dx, u_k + du) - x_{k+1}, dl)
+    du*(dx, dl)      : dQ_k/du = 0, by inverting z -> [dx, dQ_k/du, dl] (``da.calculus.invert``)
+    V_k(dx, dl)      = Q_k(dx, du*(dx, dl), dl)
+
+and each stage's law re-optimises the multipliers: dl*(dx) from dV_k/dl = 0 (inverted the
+same way), delta u*_k(dx) = du*(dx, dl*(dx)). The stage maps f_k, costs and terminal
+functions are the problem's own, expanded to order k on DA; derivatives and inversions lose one
+order, so the law is exact to order k - 1 (the truncated Taylor series of the re-optimised
+control). Where the remaining stages cannot move every terminal row (the multipliers' block of
+V_k singular: the last few stages of a short horizon), the stage has no law (None).
+
+Built for problems whose stage constraints are inactive at the solution and whose terminal
+conditions are equalities (``g_teq``; inactive ``g_tineq`` rows are dropped); anything else
+is refused by name.
+"""
+from __future__ import annotations
+
+import functools
+from dataclasses import dataclass
+
+import numpy as np
+
+from .da import functions as dm
+from .da.calculus import derivative, invert, partial_evaluate
+from .da.core import DA, _wrap, variables
+from .da.maps import compose, evaluate
+from .da.monomials import MAX_ORDER, tables
+from .errors import DaddyError
+from .problem import Problem
+
+ACTIVE_TOL = 1e-7   # a stage or terminal inequality above -ACTIVE_TOL counts as active
+
+
+@dataclass(frozen=True)
+class Policy:
+    """Feedback laws of a solution: u_k(x) = U[k] + law_k(x - X[k]).
+
+    Attributes:
+        order: the laws' order (the stage maps' order - 1).
+        X: (N+1, nx) the states the laws are expanded about; U: (N, nu) the controls.
+        coefficients: (N, M, nu) each stage's law in nx variables (``da.monomials.tables(nx,
+            order)`` layout); NaN rows for a stage without a law (``has_law``).
+    """
+
+    order: int
+    X: np.ndarray
+    U: np.ndarray
+    coefficients: np.ndarray
+
+    @property
+    def nx(self) -> int:
+        return self.X.shape[1]
+
+    @property
+    def has_law(self) -> np.ndarray:
+        """(N,) bool: the stages whose law exists."""
+        return np.all(np.isfinite(self.coefficients), axis=(1, 2))
+
+    def law(self, k: int) -> DA | None:
+        """Stage k's law as a DA (nu,) in nx variables, or None."""
+        if not self.has_law[k]:
+            return None
+        return DA(self.coefficients[k], tables(self.nx, self.order))
+
+    def control(self, k: int, x) -> np.ndarray:
+        """(nu,) the control of stage k for the state x (nx,): U[k] + law_k(x - X[k]). A
+        DaddyError for a stage without a law."""
+        law = self.law(k)
+        if law is None:
+            raise DaddyError(f"policy: stage {k} has no feedback law (the remaining stages "
+                             "cannot move every terminal row)")
+        return self.U[k] + evaluate(law, np.asarray(x, float) - self.X[k])
+
+    def truncated(self, order: int) -> "Policy":
+        """The same laws to a lower ``order``: the laws are truncated Taylor series, so this is
+        the policy an order-``order`` build would give."""
+        if not (isinstance(order, int) and 1 <= order <= self.order):
+            raise DaddyError(f"policy: a truncation order must be in [1, {self.order}], got "
+                             f"{order!r}")
+        T = tables(self.nx, order)
+        return Policy(order, self.X, self.U, self.coefficients[:, :T.size].copy())
+
+    def to_dict(self) -> dict:
+        return {"order": self.order, "X": self.X.tolist(), "U": self.U.tolist(),
+                "coefficients": np.where(np.isfinite(self.coefficients), self.coefficients,
+                                         None).tolist()}
+
+    @classmethod
+    def from_dict(cls, d: dict) -> "Policy":
+        try:
+            c = np.array(d["coefficients"], dtype=float)
+            return cls(int(d["order"]), np.asarray(d["X"], float), np.asarray(d["U"], float), c)
+        except (KeyError, TypeError, ValueError) as exc:
+            raise DaddyError(f"policy: a malformed policy record ({exc})") from exc
+
+
+def feedback_policy(problem: Problem, sol, order: int = 2, hom=None) -> Policy:
+    """The feedback laws of order ``order`` (1 to MAX_ORDER - 1) of the converged solution
+    ``sol`` of ``problem`` (module docstring); stage maps of order ``order`` + 1.
+
+    ``hom``: the stage cost's homotopy argument (default: the last step the solve ran,
+    ``sol.fuel_step``, or the energy step)."""
+    if not (isinstance(order, int) and 1 <= order <= MAX_ORDER - 1):
+        raise DaddyError(f"policy order must be an integer in [1, {MAX_ORDER - 1}], got {order!r}")
+    k = order + 1
+    X, U = np.asarray(sol.X, float), np.asarray(sol.U, float)
+    nx, nu, N = problem.nx, problem.nu, problem.N
+    if X.shape != (N + 1, nx) or U.shape != (N, nu):
+        raise DaddyError(f"policy: the solution's X {X.shape} / U {U.shape} are not this "
+                         f"problem's ({N + 1}, {nx}) / ({N}, {nu})")
+    hom = (sol.fuel_step or (0.0, 1.0)) if hom is None else hom
+    lam = _terminal_multipliers(problem, X, U, sol.duals)
+    nl = lam.size
+    n = nx + nu + nl
+    if n > 64:
+        raise DaddyError(f"policy: {n} DA variables (states, controls, terminal rows) exceed 64")
+    xs = variables(X[:-1].T, order=k, n=n)                         # (nx, N) at every stage
+    us = variables(U.T, order=k, n=n, first=nx)                      # (nu, N)
+    F = problem.step(xs, us, problem.stage_dt, problem.stage_t0)      # (nx, N)
+    L = problem.stage_cost(xs, us, problem.stage_dt, hom)            # (N,)
+    V = _terminal_lagrangian(problem, X[-1], lam, k, n)
+    ident = variables(np.zeros(n), order=k)                          # z itself, (n,)
+    laws = np.full((N, tables(nx, order).size, nu), np.nan)
+    for j in range(N - 1, -1, -1):
+        G = dm.concatenate([F[:, j] - X[j + 1], ident[nx:]])
+        Q = L[j] + compose(V, G)
+        du = _stationary(Q, ident, nx, nu)                           # du*(dx, dl), (nu,)
+        V = compose(Q, dm.concatenate([ident[:nx], du, ident[nx + nu:]]))
+        law = _with_multipliers(V, du, ident, nx, nu, nl)
+        if law is not None:
+            laws[j] = _restrict(law, nx, order).c
+    return Policy(order, X.copy(), U.copy(), laws)
+
+
+def _stationary(Q: DA, ident: DA, first: int, count: int) -> DA:
+    """The variables first..first+count of z where dQ/dz = 0 over them, as polynomials of the
+    other variables: the inverse of z -> [.., dQ/dz_first.., ..] at zero gradient."""
+    grad = [derivative(Q, first + i) for i in range(count)]
+    M = dm.concatenate([ident[:first], dm.stack(grad), ident[first + count:]])
+    Ninv = invert(M)
+    return partial_evaluate(Ninv[first:first + count],
+                            {first + i: -float(grad[i].cons) for i in range(count)})
+
+
+def _with_multipliers(V: DA, du: DA, ident: DA, nx: int, nu: int, nl: int) -> DA | None:
+    """du*(dx, dl*(dx)): the multipliers re-optimised (dV/dl = 0), None where V's multiplier
+    block is singular."""
+    if nl == 0:
+        return du
+    try:
+        dl = _stationary(V, ident, nx + nu, nl)
+    except DaddyError:
+        return None
+    zeros = 0.0 * ident[nx:nx + nu]
+    return compose(du, dm.concatenate([ident[:nx], zeros, dl]))
+
+
+def _terminal_lagrangian(problem: Problem, xN: np.ndarray, lam: np.ndarray, k: int,
+                         n: int) -> DA:
+    """phi(x_N + dx) + (lam + dl)^T psi(x_N + dx) in the sweep's algebra."""
+    nx = problem.nx
+    x = variables(xN, order=k, n=n)
+    V = problem.terminal_cost(x, problem.x_target) + 0.0 * x[0]
+    if lam.size:
+        psi = problem.g_teq(x, problem.x_target)
+        mult = variables(lam, order=k, n=n, first=n - lam.size)
+        V = V + dm.dot(mult, psi)
+    return V
+
+
+def _terminal_multipliers(problem: Problem, X, U, duals) -> np.ndarray:
+    """The solution's multipliers of ``g_teq``; refuses active stage constraints and active
+    terminal inequalities (module docstring)."""
+    g, ni, gt, nti = problem.constraint_values(X, U)
+    labels = problem.labels
+    if g is not None:
+        if g.shape[0] > ni:
+            raise DaddyError("policy: stage equalities (g_eq) are not built into the feedback "
+                             "laws yet")
+        active = np.argwhere(g[:ni] > -ACTIVE_TOL)
+        if active.size:
+            row, stage = active[0]
+            name = labels.get("g_ineq", ())
+            raise DaddyError(f"policy: the stage constraint "
+                             f"{name[row] if row < len(name) else row!r} is active at stage "
+                             f"{stage}; feedback laws are built where every stage constraint "
+                             "is inactive")
+    if gt is not None and nti and np.any(gt[:nti] > -ACTIVE_TOL):
+        raise DaddyError("policy: a terminal inequality (g_tineq) is active; feedback laws are "
+                         "built for terminal equalities (g_teq)")
+    nte = 0 if gt is None else gt.shape[0] - nti
+    lam_t = np.asarray((duals or {}).get("lam_t", []), float)
+    if lam_t.size != nti + nte:
+        raise DaddyError(f"policy: the solution has {lam_t.size} terminal multipliers, the "
+                         f"problem {nti + nte} terminal rows (solve it again)")
+    return lam_t[nti:]
+
+
+def _restrict(p: DA, m: int, order: int) -> DA:
+    """p (shape (nu,), in n variables) as a polynomial of its first m variables to ``order``
+    (it must not depend on the others)."""
+    keep = _restriction(p.T.n, p.T.k, m, order)
+    return _wrap(np.ascontiguousarray(p.c[keep]), tables(m, order))
+
+
+@functools.lru_cache(maxsize=None)
+def _restriction(n: int, k: int, m: int, order: int) -> np.ndarray:
+    """Indices in tables(n, k) of the monomials of tables(m, order) (others' exponents 0)."""
+    index = {tuple(e): i for i, e in enumerate(tables(n, k).exponents.tolist())}
+    return np.array([index[tuple(e) + (0,) * (n - m)]
+                     for e in tables(m, order).exponents.tolist()], int)
+
+
+__all__ = ["Policy", "feedback_policy"]

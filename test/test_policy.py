@@ -1,0 +1,143 @@
+"""Polynomial feedback laws (issue 47, ``daddy_core/policy.py``) on the issue's planar orbit
+raise: the law of the first stage against the issue's Taylor coefficients of the re-optimised
+control, and against re-solves of perturbed problems in this test (its error falls by at least
+5x per order); an LQ problem's law against its closed form; refusals named."""
+import numpy as np
+import pytest
+
+from daddy_core.da import functions as dm
+from daddy_core.dynamics import Dynamics
+from daddy_core.errors import DaddyError
+from daddy_core.policy import Policy, feedback_policy
+from daddy_core.problem import Problem, flow_step
+from daddy_core.solver import SolverOptions, solve
+
+R1 = 1.5
+TIGHT = SolverOptions(kkt=dict(tol=1e-10))
+
+
+def _rhs(t, x, u):
+    k = (x[0] * x[0] + x[1] * x[1]) ** -1.5
+    return dm.stack([x[2], x[3], -x[0] * k + u[0], -x[1] * k + u[1]])
+
+
+def _on_circle(x, xt):
+    return dm.stack([dm.sqrt(x[0] * x[0] + x[1] * x[1]) - R1, x[0] * x[2] + x[1] * x[3],
+                     x[0] * x[3] - x[1] * x[2] - np.sqrt(R1)])
+
+
+def _orbit_raise(x0):
+    """The issue's problem: mu = 1, 40 stages of 3 pi / 40, RK4 with 4 sub-steps, L = |u|^2 dt,
+    arrival anywhere on the circular orbit of radius 1.5, no thrust bound."""
+    return Problem(name="orbit_raise", nu=2, x0=np.asarray(x0, float), x_target=np.zeros(4),
+                   stage_dt=np.full(40, 3 * np.pi / 40),
+                   step=flow_step(Dynamics(_rhs), "rk4", rk4_steps=4),
+                   stage_cost=lambda x, u, dt, hom: (u[0] * u[0] + u[1] * u[1]) * dt,
+                   terminal_cost=lambda x, xt: x[0] * 0.0, g_teq=_on_circle)
+
+
+@pytest.fixture(scope="module")
+def raise_policy():
+    problem = _orbit_raise([1.0, 0.0, 0.0, 1.0])
+    sol = solve(problem, np.full((40, 2), 1e-3), options=TIGHT)
+    return problem, sol, feedback_policy(problem, sol, order=3)
+
+
+def _coefficients(law, var, order):
+    """The law's Taylor coefficients along one state variable, degrees 1..order: (order, nu)."""
+    e = law.T.exponents
+    return np.array([law.c[np.flatnonzero((e[:, var] == d) & (e.sum(axis=1) == d))[0]]
+                     for d in range(1, order + 1)])
+
+
+def test_the_first_stages_law_has_the_issues_taylor_coefficients(raise_policy):
+    problem, sol, policy = raise_policy
+    assert sol.cost == pytest.approx(0.0037561617, abs=1e-10)
+    np.testing.assert_allclose(sol.U[0], [-0.00345770, 0.01781139], atol=1e-8)
+    c = _coefficients(policy.law(0), 0, 3)          # along the radial position
+    np.testing.assert_allclose(c[0], [0.0028946, -0.0745348], rtol=0, atol=1e-6)
+    np.testing.assert_allclose(c[1], [0.42081, 0.04117], rtol=1e-3)
+    np.testing.assert_allclose(c[2], [-0.28, -11.67], rtol=2e-2)
+    c = _coefficients(policy.law(0), 3, 3)          # along the tangential velocity
+    np.testing.assert_allclose(c[1, 0], 0.7457, rtol=1e-3)
+    np.testing.assert_allclose(c[2], [2.0, -33.4], rtol=2e-2)
+    # a law is the truncated Taylor series: the order-2 build is the order-3 law truncated
+    low = feedback_policy(problem, sol, order=2)
+    np.testing.assert_allclose(low.coefficients, policy.truncated(2).coefficients,
+                               rtol=1e-6, atol=1e-10)   # round-off through the inversions
+
+
+@pytest.mark.parametrize("var", [0, 3])
+def test_the_laws_error_against_re_solves_falls_with_each_order(raise_policy, var):
+    """Perturbed by +-0.003 in the radial position or the tangential velocity, re-solved from
+    the nominal solution: the first control the order-1, -2, -3 laws give, against the
+    re-solve's, at least 5x closer per order."""
+    problem, sol, policy = raise_policy
+    errors = np.zeros(3)
+    for delta in (0.003, -0.003):
+        x0 = problem.x0.copy()
+        x0[var] += delta
+        again = solve(_orbit_raise(x0), sol, options=TIGHT)
+        assert again.max_violation < 1e-10
+        for i, order in enumerate((1, 2, 3)):
+            u = policy.truncated(order).control(0, x0)
+            errors[i] = max(errors[i], np.abs(u - again.U[0]).max())
+    assert errors[0] < 2e-5
+    assert errors[0] >= 5 * errors[1] and errors[1] >= 5 * errors[2]
+
+
+def test_an_lq_law_is_its_closed_form_and_is_exact_at_any_distance():
+    """x+ = A x + B u, J = sum u^2, x_N fixed: the optimal first control is linear in x0,
+    u_0(x0) = -B^T (A^T)^(N-1) W^-1 (A^N x0 - x_t) / 1 with W the reachability Gramian (from
+    numpy); the order-1 law equals it, and its higher terms vanish."""
+    N = 6
+    A = np.array([[1.0, 0.5], [0.0, 1.0]])
+    B = np.array([[0.125], [0.5]])
+    target = np.array([3.0, -1.0])
+
+    def step(x, u, dt):
+        return dm.stack([x[0] + 0.5 * x[1] + 0.125 * u[0], x[1] + 0.5 * u[0]])
+    problem = Problem(name="lq", nu=1, x0=np.array([1.0, 0.0]), x_target=target,
+                      stage_dt=np.full(N, 0.5), step=step,
+                      stage_cost=lambda x, u, dt, hom: u[0] * u[0],
+                      terminal_cost=lambda x, xt: 0.0 * x[0],
+                      g_teq=lambda x, xt: dm.stack([x[0] - xt[0], x[1] - xt[1]]))
+    sol = solve(problem, np.zeros((N, 1)), options=TIGHT)
+    policy = feedback_policy(problem, sol, order=3)
+    Ak = [np.linalg.matrix_power(A, j) for j in range(N + 1)]
+    W = sum(Ak[N - 1 - j] @ B @ B.T @ Ak[N - 1 - j].T for j in range(N))
+    x0 = np.array([1.7, -0.4])
+    exact = (B.T @ Ak[N - 1].T @ np.linalg.solve(W, target - Ak[N] @ x0))
+    np.testing.assert_allclose(policy.control(0, x0), exact, rtol=1e-9, atol=1e-10)
+    assert np.abs(policy.coefficients[0, 1 + 2:]).max() < 1e-9     # no terms above degree 1
+    # the last stage alone cannot reach both target rows: no law there
+    assert not policy.has_law[-1] and policy.has_law[:-1].all()
+    with pytest.raises(DaddyError, match="no feedback law"):
+        policy.control(N - 1, x0)
+
+
+def test_a_policy_round_trips_through_its_record(raise_policy):
+    _, _, policy = raise_policy
+    back = Policy.from_dict(policy.to_dict())
+    x = np.array([1.001, 0.0, 0.0, 0.999])
+    np.testing.assert_array_equal(back.control(0, x), policy.control(0, x))
+    assert list(back.has_law) == list(policy.has_law)
+
+
+def test_active_stage_constraints_are_refused_by_name():
+    """A thrust bound active on the solution: the laws are not built (named, with the stage)."""
+    problem = Problem(name="bounded", nu=1, x0=np.array([0.0, 0.0]),
+                      x_target=np.array([10.0, 0.0]), stage_dt=np.full(10, 0.5),
+                      step=lambda x, u, dt: dm.stack([x[0] + x[1] * dt + 0.5 * u[0] * dt * dt,
+                                                      x[1] + u[0] * dt]),
+                      stage_cost=lambda x, u, dt, hom: u[0] * u[0] * dt,
+                      terminal_cost=lambda x, xt: 0.0 * x[0],
+                      g_teq=lambda x, xt: dm.stack([x[0] - xt[0], x[1] - xt[1]]),
+                      g_ineq=lambda x, u, dt: dm.stack([u[0] * u[0] - 4.0]),
+                      labels={"g_ineq": ("thrust bound",)})
+    sol = solve(problem, np.zeros((10, 1)))
+    assert sol.converged
+    with pytest.raises(DaddyError, match="thrust bound"):
+        feedback_policy(problem, sol, order=2)
+    with pytest.raises(DaddyError, match="order"):
+        feedback_policy(problem, sol, order=7)
