@@ -166,7 +166,6 @@ def _with_multipliers(V: DA, du: DA, ident: DA, nx: int, nu: int, nl: int) -> DA
 def _terminal_lagrangian(problem: Problem, xN: np.ndarray, lam: np.ndarray, k: int,
                          n: int) -> DA:
     """phi(x_N + dx) + (lam + dl)^T psi(x_N + dx) in the sweep's algebra."""
-    nx = problem.nx
     x = variables(xN, order=k, n=n)
     V = problem.terminal_cost(x, problem.x_target) + 0.0 * x[0]
     if lam.size:

@@ -141,3 +141,19 @@ def test_active_stage_constraints_are_refused_by_name():
         feedback_policy(problem, sol, order=2)
     with pytest.raises(DaddyError, match="order"):
         feedback_policy(problem, sol, order=7)
+
+
+def test_solve_returns_the_policy_it_is_asked_for_and_its_json_keeps_it(tmp_path):
+    problem = _orbit_raise([1.0, 0.0, 0.0, 1.0])
+    sol = solve(problem, np.full((40, 2), 1e-3),
+                options=SolverOptions(kkt=dict(tol=1e-10), policy=dict(order=2)))
+    assert sol.policy is not None and sol.policy.order == 2 and sol.policy_error is None
+    path = tmp_path / "raise.json"
+    sol.to_json(path)
+    back = type(sol).from_json(path)
+    x = np.array([1.002, 0.0, 0.001, 1.0])
+    np.testing.assert_array_equal(back.policy.control(3, x), sol.policy.control(3, x))
+    plain = solve(problem, sol)
+    assert plain.policy is None and plain.policy_error is None
+    with pytest.raises(DaddyError, match="policy.order"):
+        SolverOptions(policy=dict(order=9))

@@ -248,8 +248,21 @@ class RunOptions(_Group):
             raise DaddyError(f"options.run.time_budget_s must be > 0, got {tb!r}")
 
 
+@dataclass(frozen=True)
+class PolicyOptions(_Group):
+    """The feedback laws a converged solve returns (``daddy_core.policy``)."""
+
+    order: int = 0                    # the laws' order, 1-5, from stage maps one order higher (0: none)
+
+    def __post_init__(self):
+        if isinstance(self.order, bool) or self.order not in range(0, 6):
+            raise DaddyError(f"options.policy.order must be an integer in 0..5 (0: no policy), "
+                             f"got {self.order!r}")
+
+
 GROUPS = {"ddp": DDPOptions, "aul": AULOptions, "newton": NewtonOptions, "start": StartOptions,
-          "kkt": KKTOptions, "end_game": EndGameOptions, "run": RunOptions}
+          "kkt": KKTOptions, "end_game": EndGameOptions, "run": RunOptions,
+          "policy": PolicyOptions}
 
 # the options' flat names before they were grouped -> (group, field): for the errors that name
 # a field's new place, and for the flat per-case settings of case files
@@ -299,7 +312,7 @@ def _homotopy(steps) -> tuple:
 class SolverOptions:
     """Every tolerance and limit of a solve, one group per algorithm (each group's fields are
     documented where the group is defined): ``ddp``, ``aul``, ``newton``, ``start``, ``kkt``,
-    ``end_game``, ``run``, and ``homotopy``, the (h, delta) steps of eq. 12-14.
+    ``end_game``, ``run``, ``policy``, and ``homotopy``, the (h, delta) steps of eq. 12-14.
 
     A group is given as its object or as a dict of its fields, e.g.
     ``SolverOptions(ddp=dict(tol=1e-6), kkt=dict(max_iter=50))``; ``with_`` replaces fields the
@@ -314,6 +327,7 @@ class SolverOptions:
     kkt: KKTOptions
     end_game: EndGameOptions
     run: RunOptions
+    policy: PolicyOptions
     homotopy: tuple
 
     def __init__(self, homotopy=((0.0, 1e-2),), **groups):

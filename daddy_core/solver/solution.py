@@ -12,6 +12,7 @@ import numpy as np
 from .. import trajectory_output
 from ..dynamics.units import Units
 from ..errors import DaddyError
+from ..policy import Policy
 from .stage_maps import StageMaps
 
 
@@ -89,6 +90,9 @@ class Solution:
     min_path_margin: float | None = None
     parameters: dict | None = None   # static parameters {name: value} (``static_parameters``)
     phases: list | None = None   # a multi-phase problem's phases (``phases.phase_report``)
+    # feedback laws (``options.policy.order``; ``daddy_core.policy``), or why they were not built
+    policy: Policy | None = field(default=None, repr=False, compare=False)
+    policy_error: str | None = None
     stage_maps: StageMaps | None = field(default=None, repr=False, compare=False)
 
     _ARRAYS = ("X", "U", "stage_dt", "gains_a", "gains_b")
@@ -135,7 +139,9 @@ class Solution:
 
     def to_dict(self) -> dict:
         d = {f.name: copy.deepcopy(getattr(self, f.name)) for f in fields(self)
-             if f.name not in self._ARRAYS + ("stage_maps",)}
+             if f.name not in self._ARRAYS + ("stage_maps", "policy")}
+        if self.policy is not None:
+            d["policy"] = self.policy.to_dict()
         for k in self._ARRAYS:
             d[k] = np.asarray(getattr(self, k)).tolist()
         if d["repropagation_miss"] == np.inf:   # strict JSON has no infinity
@@ -165,6 +171,8 @@ class Solution:
             kw[k] = np.asarray(kw[k], dtype=float)
         if kw.get("repropagation_miss") == "inf":
             kw["repropagation_miss"] = np.inf
+        if kw.get("policy") is not None:
+            kw["policy"] = Policy.from_dict(kw["policy"])
         return cls(**kw)
 
     @classmethod

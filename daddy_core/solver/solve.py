@@ -16,7 +16,9 @@ from dataclasses import replace
 import numpy as np
 
 from ..path_constraints import violated_at_start
+from ..errors import DaddyError
 from ..phases import phase_report
+from ..policy import feedback_policy
 from ..problem import Problem
 from . import end_game, path_exchange
 from .assemble import repropagation_miss, solution, unsolved
@@ -54,8 +56,13 @@ def solve(problem: Problem, u_guess=None, method: Method | str = Method.DYN,
     if layout is not None:   # static parameters (``static_parameters``): the user's guess padded
         u_guess = _padded_guess(layout, u_guess)
     sol = _solve(problem, u_guess, method, fuel_optimal, polish, options, case_name, progress)
+    order = (options or SolverOptions()).policy.order
     if layout is None:
+        if order:
+            _attach_policy(problem, sol, order)
         return sol
+    if order:
+        sol.policy_error = "feedback laws are not built for static-parameter problems yet"
     sol.parameters = layout.values(sol.X)
     if layout.base is None:   # phases: the augmented trajectory, and each phase in the user's view
         sol.phases = phase_report(problem, sol.X, sol.U, sol.duals)
@@ -65,6 +72,18 @@ def solve(problem: Problem, u_guess=None, method: Method | str = Method.DYN,
     return replace(sol, X=X, U=U, stage_dt=dt, stage_maps=None,
                    gains_a=a[:, :layout.nu] if a.ndim == 2 else a,
                    gains_b=b[:, :layout.nu, :layout.nx] if b.ndim == 3 else b)
+
+
+def _attach_policy(problem: Problem, sol: Solution, order: int) -> None:
+    """``sol.policy``: the feedback laws of a converged solve (``daddy_core.policy``), or in
+    ``sol.policy_error`` why there are none; the solution itself is kept either way."""
+    if not sol.converged:
+        sol.policy_error = "the solve did not converge: no feedback laws"
+        return
+    try:
+        sol.policy = feedback_policy(problem, sol, order)
+    except DaddyError as exc:
+        sol.policy_error = str(exc)
 
 
 def _padded_guess(layout, guess):
