@@ -71,13 +71,17 @@ class Policy:
         return DA(self.coefficients[k], tables(self.nx, self.order))
 
     def control(self, k: int, x) -> np.ndarray:
-        """(nu,) the control of stage k for the state x (nx,): U[k] + law_k(x - X[k]). A
-        DaddyError for a stage without a law."""
+        """The control of stage k for the state x: U[k] + law_k(x - X[k]); x (nx,) gives
+        (nu,), a batch x (nx, B) gives (nu, B). A DaddyError for a stage without a law."""
         law = self.law(k)
         if law is None:
             raise DaddyError(f"policy: stage {k} has no feedback law (the remaining stages "
                              "cannot move every terminal row)")
-        return self.U[k] + evaluate(law, np.asarray(x, float) - self.X[k])
+        x = np.asarray(x, float)
+        if x.ndim == 1:
+            return self.U[k] + evaluate(law, x - self.X[k])
+        batch = DA(law.c[:, :, None], law.T)                    # (nu, 1): one law, B points
+        return self.U[k][:, None] + evaluate(batch, x - self.X[k][:, None])
 
     def truncated(self, order: int) -> "Policy":
         """The same laws to a lower ``order``: the laws are truncated Taylor series, so this is
