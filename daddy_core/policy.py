@@ -17,9 +17,12 @@ order, so the law is exact to order k - 1 (the truncated Taylor series of the re
 control). Where the remaining stages cannot move every terminal row (the multipliers' block of
 V_k singular: the last few stages of a short horizon), the stage has no law (None).
 
-Built for problems whose stage constraints are inactive at the solution and whose terminal
-conditions are equalities (``g_teq``; inactive ``g_tineq`` rows are dropped); anything else
-is refused by name.
+Stage constraints active at the solution (inequalities within ACTIVE_TOL of their bound, and
+every equality) are held in the law: with their multipliers dnu as further variables, the
+stage's law solves its KKT system dQ/du + g_u^T nu = 0, g = 0 instead of dQ/du = 0 -- the
+active set of the solution, valid while a perturbation does not change it. The terminal
+conditions must be equalities (``g_teq``; inactive ``g_tineq`` rows are dropped); an active
+terminal inequality is refused by name.
 """
 from __future__ import annotations
 
@@ -122,23 +125,31 @@ def feedback_policy(problem: Problem, sol, order: int = 2, hom=None) -> Policy:
                          f"problem's ({N + 1}, {nx}) / ({N}, {nu})")
     hom = (sol.fuel_step or (0.0, 1.0)) if hom is None else hom
     lam = _terminal_multipliers(problem, X, U, sol.duals)
-    nl = lam.size
-    n = nx + nu + nl
+    active = _active_rows(problem, X, U)
+    nl, m = lam.size, max(map(len, active), default=0)
+    n = nx + nu + m + nl
     if n > 64:
-        raise DaddyError(f"policy: {n} DA variables (states, controls, terminal rows) exceed 64")
+        raise DaddyError(f"policy: {n} DA variables (states, controls, active stage rows, "
+                         "terminal rows) exceed 64")
     xs = variables(X[:-1].T, order=k, n=n)                         # (nx, N) at every stage
     us = variables(U.T, order=k, n=n, first=nx)                      # (nu, N)
     F = problem.step(xs, us, problem.stage_dt, problem.stage_t0)      # (nx, N)
     L = problem.stage_cost(xs, us, problem.stage_dt, hom)            # (N,)
+    rows = problem.path_constraints(xs, us, problem.stage_dt, problem.stage_t0)[0] if m else None
     V = _terminal_lagrangian(problem, X[-1], lam, k, n)
     ident = variables(np.zeros(n), order=k)                          # z itself, (n,)
     laws = np.full((N, tables(nx, order).size, nu), np.nan)
     for j in range(N - 1, -1, -1):
         G = dm.concatenate([F[:, j] - X[j + 1], ident[nx:]])
         Q = L[j] + compose(V, G)
-        du = _stationary(Q, ident, nx, nu)                           # du*(dx, dl), (nu,)
+        # the active rows held as equalities, their multipliers nu the variables after du:
+        # stationary in (du, dnu) is the stage's KKT system
+        held = Q
+        for r, i in enumerate(active[j]):
+            held = held + ident[nx + nu + r] * rows[i, j]
+        du = _stationary(held, ident, nx, nu + len(active[j]))[:nu]  # du*(dx, dl), (nu,)
         V = compose(Q, dm.concatenate([ident[:nx], du, ident[nx + nu:]]))
-        law = _with_multipliers(V, du, ident, nx, nu, nl)
+        law = _with_multipliers(V, du, ident, nx, nu + m, nl)
         if law is not None:
             laws[j] = _restrict(law, nx, order).c
     return Policy(order, X.copy(), U.copy(), laws)
@@ -154,17 +165,28 @@ def _stationary(Q: DA, ident: DA, first: int, count: int) -> DA:
                             {first + i: -float(grad[i].cons) for i in range(count)})
 
 
-def _with_multipliers(V: DA, du: DA, ident: DA, nx: int, nu: int, nl: int) -> DA | None:
+def _with_multipliers(V: DA, du: DA, ident: DA, nx: int, between: int, nl: int) -> DA | None:
     """du*(dx, dl*(dx)): the multipliers re-optimised (dV/dl = 0), None where V's multiplier
-    block is singular."""
+    block is singular (``between``: the variables between dx and dl, which V does not use)."""
     if nl == 0:
         return du
     try:
-        dl = _stationary(V, ident, nx + nu, nl)
+        dl = _stationary(V, ident, nx + between, nl)
     except DaddyError:
         return None
-    zeros = 0.0 * ident[nx:nx + nu]
+    zeros = 0.0 * ident[nx:nx + between]
     return compose(du, dm.concatenate([ident[:nx], zeros, dl]))
+
+
+def _active_rows(problem: Problem, X, U) -> list[list[int]]:
+    """Each stage's rows of ``problem.path_constraints`` held in its law: the inequalities
+    within ACTIVE_TOL of their bound, and every equality."""
+    g, ni = problem.path_constraints(X[:-1].T, U.T, problem.stage_dt, problem.stage_t0)
+    if g is None:
+        return [[] for _ in range(problem.N)]
+    g = np.asarray(g, float)
+    held = np.vstack([g[:ni] > -ACTIVE_TOL, np.ones((g.shape[0] - ni, g.shape[1]), bool)])
+    return [np.flatnonzero(held[:, j]).tolist() for j in range(problem.N)]
 
 
 def _terminal_lagrangian(problem: Problem, xN: np.ndarray, lam: np.ndarray, k: int,
@@ -180,22 +202,9 @@ def _terminal_lagrangian(problem: Problem, xN: np.ndarray, lam: np.ndarray, k: i
 
 
 def _terminal_multipliers(problem: Problem, X, U, duals) -> np.ndarray:
-    """The solution's multipliers of ``g_teq``; refuses active stage constraints and active
-    terminal inequalities (module docstring)."""
-    g, ni, gt, nti = problem.constraint_values(X, U)
-    labels = problem.labels
-    if g is not None:
-        if g.shape[0] > ni:
-            raise DaddyError("policy: stage equalities (g_eq) are not built into the feedback "
-                             "laws yet")
-        active = np.argwhere(g[:ni] > -ACTIVE_TOL)
-        if active.size:
-            row, stage = active[0]
-            name = labels.get("g_ineq", ())
-            raise DaddyError(f"policy: the stage constraint "
-                             f"{name[row] if row < len(name) else row!r} is active at stage "
-                             f"{stage}; feedback laws are built where every stage constraint "
-                             "is inactive")
+    """The solution's multipliers of ``g_teq``; refuses active terminal inequalities (module
+    docstring)."""
+    _, _, gt, nti = problem.constraint_values(X, U)
     if gt is not None and nti and np.any(gt[:nti] > -ACTIVE_TOL):
         raise DaddyError("policy: a terminal inequality (g_tineq) is active; feedback laws are "
                          "built for terminal equalities (g_teq)")

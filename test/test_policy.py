@@ -124,21 +124,32 @@ def test_a_policy_round_trips_through_its_record(raise_policy):
     assert list(back.has_law) == list(policy.has_law)
 
 
-def test_active_stage_constraints_are_refused_by_name():
-    """A thrust bound active on the solution: the laws are not built (named, with the stage)."""
+def test_active_bounds_are_held_in_the_laws():
+    """Rest to rest over 10 in 5 s with |u| <= 2: the unbounded optimum's peak 2.4 saturates
+    the first and last stages. Perturbed by 0.01 in position, the laws (the bound held on the
+    saturated stages) give every stage's re-solved control, flown stage by stage from the
+    perturbed start, to 1e-6 (the active set unchanged; the laws are affine here)."""
+    def step(x, u, dt):
+        return dm.stack([x[0] + x[1] * dt + 0.5 * u[0] * dt * dt, x[1] + u[0] * dt])
     problem = Problem(name="bounded", nu=1, x0=np.array([0.0, 0.0]),
-                      x_target=np.array([10.0, 0.0]), stage_dt=np.full(10, 0.5),
-                      step=lambda x, u, dt: dm.stack([x[0] + x[1] * dt + 0.5 * u[0] * dt * dt,
-                                                      x[1] + u[0] * dt]),
+                      x_target=np.array([10.0, 0.0]), stage_dt=np.full(10, 0.5), step=step,
                       stage_cost=lambda x, u, dt, hom: u[0] * u[0] * dt,
                       terminal_cost=lambda x, xt: 0.0 * x[0],
                       g_teq=lambda x, xt: dm.stack([x[0] - xt[0], x[1] - xt[1]]),
                       g_ineq=lambda x, u, dt: dm.stack([u[0] * u[0] - 4.0]),
                       labels={"g_ineq": ("thrust bound",)})
-    sol = solve(problem, np.zeros((10, 1)))
-    assert sol.converged
-    with pytest.raises(DaddyError, match="thrust bound"):
-        feedback_policy(problem, sol, order=2)
+    sol = solve(problem, np.zeros((10, 1)), options=TIGHT)
+    assert sol.converged and np.abs(sol.U[0, 0]) == pytest.approx(2.0, abs=1e-8)
+    policy = feedback_policy(problem, sol, order=2)
+    x0 = problem.x0 + np.array([0.01, 0.0])
+    again = solve(problem.with_x0(x0), sol, options=TIGHT)
+    assert again.converged
+    x = x0
+    for k in range(problem.N):
+        u = policy.control(k, x) if policy.has_law[k] else again.U[k]
+        np.testing.assert_allclose(u, again.U[k], atol=1e-6)
+        x = np.asarray(step(x, u, 0.5))
+    np.testing.assert_allclose(x, problem.x_target, atol=1e-6)
     with pytest.raises(DaddyError, match="order"):
         feedback_policy(problem, sol, order=7)
 
