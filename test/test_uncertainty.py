@@ -82,3 +82,14 @@ def test_the_feedback_laws_shrink_the_terminal_rows_dispersion(flight):
     open_rows = np.asarray(_on_circle(_monte_carlo(problem, sol, None, dx0), None))
     closed_rows = np.asarray(_on_circle(_monte_carlo(problem, sol, policy, dx0), None))
     assert np.all(closed_rows.std(axis=1) * 10 < open_rows.std(axis=1))
+
+
+def test_the_policies_page_examples_run_together(capsys):
+    """docs/policies.md: the feedback-law example, then the uncertainty one continuing it."""
+    import pathlib
+    import re
+    text = (pathlib.Path(__file__).parents[1] / "docs" / "policies.md").read_text()
+    blocks = re.findall(r"```(?:python|py)\n(.*?)```", text, re.S)
+    assert len(blocks) == 2
+    exec(compile("\n".join(blocks), "docs/policies.md", "exec"), {"__name__": "docs"})
+    assert len(capsys.readouterr().out.strip().splitlines()) >= 2
