@@ -48,6 +48,9 @@ def _parser() -> argparse.ArgumentParser:
     s.add_argument("--free-tof", type=float, nargs=2, metavar=("LO", "HI"),
                    help="the time of flight free in [LO, HI] days (Earth-Mars: Mars moves on "
                         "its orbit to the arrival); a case file's problem.tof_window")
+    s.add_argument("--policy", type=int, metavar="ORDER", default=0,
+                   help="also build the solution's feedback laws of this order (1-5; the JSON "
+                        "holds them): docs/policies.md")
     s.add_argument("--free-revolutions", type=float, nargs=2, metavar=("LO", "HI"),
                    help="Earth-centred cases: the arrival angle free in [LO, HI] revolutions, "
                         "one solve (a case file's problem.revolutions_window)")
@@ -117,7 +120,8 @@ def main(argv=None) -> int:
                                     tof_window=args.free_tof,
                                     revolutions_window=args.free_revolutions)
         ddp = {} if args.globalization is None else {"globalization": args.globalization}
-        opts = case_options(case, fuel, run=dict(time_budget_s=args.time_budget), ddp=ddp)
+        opts = case_options(case, fuel, run=dict(time_budget_s=args.time_budget), ddp=ddp,
+                            policy=dict(order=args.policy))
         if args.warm_start:
             u0 = Solution.from_json(args.warm_start).U
         else:
@@ -149,6 +153,10 @@ def main(argv=None) -> int:
         print(f"  revolutions (free) {sol.parameters[ANGLE] / (2 * math.pi):.4f}")
     for ph in sol.phases or ():
         _report_phase(ph)
+    if args.policy:
+        print(f"  feedback laws of order {args.policy}: {int(sol.policy.has_law.sum())} of "
+              f"{sol.N} stages" if sol.policy is not None
+              else f"  no feedback laws: {sol.policy_error}")
     if args.json:
         sol.to_json(args.json)
     if args.npz:
@@ -187,7 +195,7 @@ def _solve_sail(case: SailCase, args) -> int:
         ("--warm-start", args.warm_start), ("--stages", args.stages),
         ("--r-min-km", args.r_min_km), ("--search-revolutions", args.search_revolutions),
         ("--npz", args.npz), ("--free-tof", args.free_tof),
-        ("--free-revolutions", args.free_revolutions)) if given]
+        ("--free-revolutions", args.free_revolutions), ("--policy", args.policy)) if given]
     if refused:
         raise DaddyError(f"{', '.join(refused)}: not for a solar-sail case ({case.name!r} "
                          "maximises its semi-major axis from --guess; its revolutions are in the "

@@ -10,7 +10,7 @@ from daddy_core.dynamics import Dynamics
 from daddy_core.errors import DaddyError
 from daddy_core.policy import Policy, feedback_policy
 from daddy_core.problem import Problem, flow_step
-from daddy_core.solver import SolverOptions, solve
+from daddy_core.solver import Solution, SolverOptions, solve
 
 R1 = 1.5
 TIGHT = SolverOptions(kkt=dict(tol=1e-10))
@@ -168,3 +168,18 @@ def test_solve_returns_the_policy_it_is_asked_for_and_its_json_keeps_it(tmp_path
     assert plain.policy is None and plain.policy_error is None
     with pytest.raises(DaddyError, match="policy.order"):
         SolverOptions(policy=dict(order=9))
+
+
+def test_daddy_solve_builds_the_laws_it_is_asked_for(tmp_path, capsys):
+    """Earth-Mars energy-optimal: laws on every stage the terminal rows leave one to (the
+    thrust bound inactive); fuel-optimal: refused, saying why (its exact fuel form)."""
+    from daddy_core.cli import main
+    path = tmp_path / "em.json"
+    assert main(["solve", "earth_mars", "--energy", "--policy", "1", "--quiet",
+                 "--json", str(path)]) == 0
+    assert "feedback laws of order 1: 38 of 40 stages" in capsys.readouterr().out
+    sol = Solution.from_json(path)
+    assert sol.policy.order == 1 and sol.policy.has_law.sum() == 38
+    assert main(["solve", "earth_mars", "--fuel", "--policy", "1", "--quiet"]) == 0
+    assert "no feedback laws: feedback laws of the exact fuel form" in capsys.readouterr().out
+    assert main(["solve", "earth_mars", "--policy", "9", "--quiet"]) == 2

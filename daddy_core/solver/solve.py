@@ -19,6 +19,7 @@ from ..path_constraints import violated_at_start
 from ..errors import DaddyError
 from ..phases import phase_report
 from ..policy import feedback_policy
+from ..throttle import has_throttle_form
 from ..problem import Problem
 from . import end_game, path_exchange
 from .assemble import repropagation_miss, solution, unsolved
@@ -56,9 +57,14 @@ def solve(problem: Problem, u_guess=None, method: Method | str = Method.DYN,
     if layout is not None:   # static parameters (``static_parameters``): the user's guess padded
         u_guess = _padded_guess(layout, u_guess)
     sol = _solve(problem, u_guess, method, fuel_optimal, polish, options, case_name, progress)
-    order = (options or SolverOptions()).policy.order
+    opts = options or SolverOptions()
+    order = opts.policy.order
     if layout is None:
-        if order:
+        if order and sol.fuel_optimal and opts.end_game.exact_fuel and has_throttle_form(problem):
+            sol.policy_error = ("feedback laws of the exact fuel form's bang-bang optimum are "
+                                "not built yet (the laws are of the problem solved; this "
+                                "solution solves its exact fuel form)")
+        elif order:
             _attach_policy(problem, sol, order)
         return sol
     if order:
