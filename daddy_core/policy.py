@@ -27,7 +27,7 @@ terminal inequality is refused by name.
 from __future__ import annotations
 
 import functools
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 
@@ -38,8 +38,12 @@ from .da.maps import compose, evaluate
 from .da.monomials import MAX_ORDER, tables
 from .errors import DaddyError
 from .problem import Problem
+from .throttle import thrust_of, throttle_form
 
 ACTIVE_TOL = 1e-7   # a stage or terminal inequality above -ACTIVE_TOL counts as active
+# a stage's systems are solved only where their linear part's condition number leaves the law
+# 6 significant digits (cond * eps <= 1e-6); beyond it the stage has no law (design notes)
+LAW_MAX_CONDITION = 1e-6 / np.finfo(float).eps
 
 
 @dataclass(frozen=True)
@@ -57,6 +61,10 @@ class Policy:
     X: np.ndarray
     U: np.ndarray
     coefficients: np.ndarray
+    # laws of an exact fuel form (``throttle``): U and the laws are [s, alpha, beta], and
+    # ``thrust`` turns them into the thrust with the form's bound and frame
+    u_max: float | None = None
+    frame: np.ndarray | None = None
 
     @property
     def nx(self) -> int:
@@ -95,18 +103,44 @@ class Policy:
         T = tables(self.nx, order)
         return Policy(order, self.X, self.U, self.coefficients[:, :T.size].copy())
 
+    def thrust(self, k: int, x) -> np.ndarray:
+        """The problem's control of stage k for the state x (as ``control`` takes it): the
+        thrust where the laws are an exact fuel form's, else ``control`` itself."""
+        v = self.control(k, x)
+        if self.frame is None:
+            return v
+        batch = v.ndim == 2
+        u = thrust_of(np.atleast_2d(v.T if batch else v), self.u_max, self.frame)
+        return u.T if batch else u[0]
+
     def to_dict(self) -> dict:
         return {"order": self.order, "X": self.X.tolist(), "U": self.U.tolist(),
                 "coefficients": np.where(np.isfinite(self.coefficients), self.coefficients,
-                                         None).tolist()}
+                                         None).tolist(),
+                "u_max": self.u_max, "frame": None if self.frame is None else self.frame.tolist()}
 
     @classmethod
     def from_dict(cls, d: dict) -> "Policy":
         try:
             c = np.array(d["coefficients"], dtype=float)
-            return cls(int(d["order"]), np.asarray(d["X"], float), np.asarray(d["U"], float), c)
+            frame = d.get("frame")
+            return cls(int(d["order"]), np.asarray(d["X"], float), np.asarray(d["U"], float), c,
+                       d.get("u_max"), None if frame is None else np.asarray(frame, float))
         except (KeyError, TypeError, ValueError) as exc:
             raise DaddyError(f"policy: a malformed policy record ({exc})") from exc
+
+
+def fuel_policy(problem: Problem, sol, order: int = 2) -> Policy:
+    """The feedback laws of a fuel-optimal solution that is its exact fuel form's optimum
+    (``throttle``): built on that form, whose bang-bang stages hold their throttle bound and
+    whose coasting stages hold their direction (no curvature there); ``Policy.thrust`` gives
+    the thrust."""
+    form = throttle_form(problem, np.asarray(sol.U, float))
+    if form is None:
+        raise DaddyError("policy: this problem has no exact fuel form (throttle.has_throttle_form)")
+    V = form.controls(np.asarray(sol.U, float))
+    laws = feedback_policy(form.problem, replace(sol, U=V), order)
+    return replace(laws, u_max=form.u_max, frame=form.frame)
 
 
 def feedback_policy(problem: Problem, sol, order: int = 2, hom=None) -> Policy:
@@ -147,7 +181,7 @@ def feedback_policy(problem: Problem, sol, order: int = 2, hom=None) -> Policy:
         held = Q
         for r, i in enumerate(active[j]):
             held = held + ident[nx + nu + r] * rows[i, j]
-        du = _stationary(held, ident, nx, nu + len(active[j]))[:nu]  # du*(dx, dl), (nu,)
+        du = _stage_law(held, ident, nx, nu, len(active[j]), j)       # du*(dx, dl), (nu,)
         V = compose(Q, dm.concatenate([ident[:nx], du, ident[nx + nu:]]))
         law = _with_multipliers(V, du, ident, nx, nu + m, nl)
         if law is not None:
@@ -155,14 +189,45 @@ def feedback_policy(problem: Problem, sol, order: int = 2, hom=None) -> Policy:
     return Policy(order, X.copy(), U.copy(), laws)
 
 
-def _stationary(Q: DA, ident: DA, first: int, count: int) -> DA:
-    """The variables first..first+count of z where dQ/dz = 0 over them, as polynomials of the
-    other variables: the inverse of z -> [.., dQ/dz_first.., ..] at zero gradient."""
-    grad = [derivative(Q, first + i) for i in range(count)]
-    M = dm.concatenate([ident[:first], dm.stack(grad), ident[first + count:]])
-    Ninv = invert(M)
-    return partial_evaluate(Ninv[first:first + count],
-                            {first + i: -float(grad[i].cons) for i in range(count)})
+def _stationary(Q: DA, ident: DA, solve: list, hold: list = ()) -> DA:
+    """z with dQ/dz_v = 0 for the variables ``solve`` and dz_v = 0 for those in ``hold``, as
+    polynomials of the others (a map (n,)): the inverse of z -> [.., dQ/dz_v.., ..] at zero
+    gradient."""
+    grad = {v: derivative(Q, v) for v in solve}
+    M = dm.stack([grad[v] if v in grad else ident[v] for v in range(ident.shape[0])])
+    fixed = {v: -float(g.cons) for v, g in grad.items()}
+    fixed.update({v: 0.0 for v in hold})
+    return partial_evaluate(invert(M, LAW_MAX_CONDITION), fixed)
+
+
+def _stage_law(held: DA, ident: DA, nx: int, nu: int, n_active: int, stage: int) -> DA:
+    """du*(dx, dl) of one stage: stationary in the controls and the active rows' multipliers.
+    Where that system is singular because some controls have no curvature and no active row
+    reads them -- a coasting stage's thrust direction in the exact fuel form -- those are held
+    at the plan's (``FLAT_CONTROL``), and the rest solved."""
+    controls = list(range(nx, nx + nu))
+    rows = list(range(nx + nu, nx + nu + n_active))
+    try:
+        return _stationary(held, ident, controls + rows)[nx:nx + nu]
+    except DaddyError:
+        pass
+    flat = [v for v in controls if _flat(held, v, rows)]
+    if not flat:
+        raise DaddyError(f"policy: stage {stage}'s control block is singular (no law)")
+    solve = [v for v in controls if v not in flat] + rows
+    return _stationary(held, ident, solve, flat)[nx:nx + nu]
+
+
+FLAT_CONTROL = 1e-14   # a control whose curvature is below this (relative) and no active row reads
+
+
+def _flat(Q: DA, v: int, rows: list) -> bool:
+    """Control variable v has (to FLAT_CONTROL) no curvature in Q and no active row's
+    multiplier term reads it linearly."""
+    H = Q.hessian()
+    scale = max(1.0, float(np.abs(H).max()))
+    return (abs(H[v, v]) <= FLAT_CONTROL * scale
+            and all(abs(H[v, r]) <= FLAT_CONTROL * scale for r in rows))
 
 
 def _with_multipliers(V: DA, du: DA, ident: DA, nx: int, between: int, nl: int) -> DA | None:
@@ -171,9 +236,10 @@ def _with_multipliers(V: DA, du: DA, ident: DA, nx: int, between: int, nl: int) 
     if nl == 0:
         return du
     try:
-        dl = _stationary(V, ident, nx + between, nl)
+        dl = _stationary(V, ident, list(range(nx + between, nx + between + nl)))
     except DaddyError:
         return None
+    dl = dl[nx + between:]
     zeros = 0.0 * ident[nx:nx + between]
     return compose(du, dm.concatenate([ident[:nx], zeros, dl]))
 

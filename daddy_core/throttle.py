@@ -74,8 +74,7 @@ class ThrottleForm:
     def thrust(self, V: np.ndarray) -> np.ndarray:
         """(N, 3 + k) [s, alpha, beta] -> (N, 3 + k) thrust; a throttle below zero (by the
         polishing's tolerance at most) is zero thrust; further columns pass unchanged."""
-        S = np.column_stack([np.maximum(V[:, 0], 0.0), V[:, 1:3]])
-        return np.column_stack([np.asarray(self._thrust(S.T), float)[:3].T, V[:, 3:]])
+        return np.column_stack([thrust_of(V[:, :3], self.u_max, self.frame), V[:, 3:]])
 
     def stage_duals(self, lam: np.ndarray) -> np.ndarray:
         """Stage multipliers in the form's rows (n_c + 1, N) -> the original's (n_c, N)."""
@@ -86,12 +85,24 @@ class ThrottleForm:
         control the dynamics read (``models.with_thrust_magnitude``'s layout)."""
         if len(v) > 3:        # prepared already
             return v
-        us = v[0] * self.u_max
-        cb = dm.cos(v[2])
-        d = (dm.sin(v[2]), cb * dm.cos(v[1]), cb * dm.sin(v[1]))
-        R = self.frame
-        u = [us * (d[0] * R[i, 0] + d[1] * R[i, 1] + d[2] * R[i, 2]) for i in range(3)]
-        return dm.stack(u + [us])
+        return _prepared_thrust(v, self.u_max, self.frame)
+
+
+def _prepared_thrust(v, u_max: float, frame: np.ndarray):
+    """[u (3), |u|] = u_max s d(alpha, beta) and its magnitude, v = [s, alpha, beta]."""
+    us = v[0] * u_max
+    cb = dm.cos(v[2])
+    d = (dm.sin(v[2]), cb * dm.cos(v[1]), cb * dm.sin(v[1]))
+    R = frame
+    u = [us * (d[0] * R[i, 0] + d[1] * R[i, 1] + d[2] * R[i, 2]) for i in range(3)]
+    return dm.stack(u + [us])
+
+
+def thrust_of(V: np.ndarray, u_max: float, frame: np.ndarray) -> np.ndarray:
+    """(B, 3) [s, alpha, beta] -> (B, 3) thrust (frame (3, 3): ``ThrottleForm.frame``); a
+    throttle below zero (by a tolerance at most) is zero thrust."""
+    S = np.column_stack([np.maximum(V[:, 0], 0.0), V[:, 1:3]])
+    return np.asarray(_prepared_thrust(S.T, u_max, frame), float)[:3].T
 
 
 def intermediate_stages(U: np.ndarray, u_max: float, tol: float = 1e-3) -> int:

@@ -82,7 +82,7 @@ def partial_evaluate(p: DA, fixed: dict) -> DA:
     return compose(p, DA(g, T))
 
 
-def invert(m: DA) -> DA:
+def invert(m: DA, max_condition: float | None = None) -> DA:
     """The inverse of the map m - m(0): the map N (constant part zero) with
     m(N(dy)) = m(0) + dy to the algebra's order, dy the displacement of the image from m(0).
 
@@ -93,6 +93,9 @@ def invert(m: DA) -> DA:
     Args:
         m: DA of shape (n, *batch) in n variables (a map of the space onto itself, one per
             batch element).
+        max_condition: the largest condition number of the linear part taken as invertible
+            (default 1 / eps: numerically singular only; a caller needing digits in the inverse
+            asks for fewer).
     Returns:
         DA of m's shape and algebra.
     Raises:
@@ -105,7 +108,8 @@ def invert(m: DA) -> DA:
     batch = m.shape[1:]
     lin = np.moveaxis(m.c[1:T.n + 1], (0, 1), (-1, -2))   # (*batch, n_out, n_in)
     cond = np.linalg.cond(lin)
-    if not np.all(np.isfinite(cond) & (cond < 1.0 / np.finfo(float).eps)):
+    limit = 1.0 / np.finfo(float).eps if max_condition is None else max_condition
+    if not np.all(np.isfinite(cond) & (cond < limit)):
         raise DaddyError(f"invert: the map's linear part is singular (condition number "
                          f"{np.max(cond):.3g}): the map has no inverse at its expansion point")
     inv = np.linalg.inv(lin)                               # (*batch, n_in, n_out)

@@ -18,7 +18,7 @@ import numpy as np
 from ..path_constraints import violated_at_start
 from ..errors import DaddyError
 from ..phases import phase_report
-from ..policy import feedback_policy
+from ..policy import feedback_policy, fuel_policy
 from ..throttle import has_throttle_form
 from ..problem import Problem
 from . import end_game, path_exchange
@@ -60,12 +60,9 @@ def solve(problem: Problem, u_guess=None, method: Method | str = Method.DYN,
     opts = options or SolverOptions()
     order = opts.policy.order
     if layout is None:
-        if order and sol.fuel_optimal and opts.end_game.exact_fuel and has_throttle_form(problem):
-            sol.policy_error = ("feedback laws of the exact fuel form's bang-bang optimum are "
-                                "not built yet (the laws are of the problem solved; this "
-                                "solution solves its exact fuel form)")
-        elif order:
-            _attach_policy(problem, sol, order)
+        if order:   # a fuel optimum in the exact form has the form's laws (``policy``)
+            exact = sol.fuel_optimal and opts.end_game.exact_fuel and has_throttle_form(problem)
+            _attach_policy(problem, sol, order, fuel_policy if exact else feedback_policy)
         return sol
     if order:
         sol.policy_error = "feedback laws are not built for static-parameter problems yet"
@@ -80,14 +77,15 @@ def solve(problem: Problem, u_guess=None, method: Method | str = Method.DYN,
                    gains_b=b[:, :layout.nu, :layout.nx] if b.ndim == 3 else b)
 
 
-def _attach_policy(problem: Problem, sol: Solution, order: int) -> None:
-    """``sol.policy``: the feedback laws of a converged solve (``daddy_core.policy``), or in
-    ``sol.policy_error`` why there are none; the solution itself is kept either way."""
+def _attach_policy(problem: Problem, sol: Solution, order: int, build) -> None:
+    """``sol.policy``: the feedback laws ``build`` makes of a converged solve
+    (``daddy_core.policy``), or in ``sol.policy_error`` why there are none; the solution itself
+    is kept either way."""
     if not sol.converged:
         sol.policy_error = "the solve did not converge: no feedback laws"
         return
     try:
-        sol.policy = feedback_policy(problem, sol, order)
+        sol.policy = build(problem, sol, order)
     except DaddyError as exc:
         sol.policy_error = str(exc)
 
