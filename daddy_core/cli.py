@@ -16,7 +16,7 @@ import numpy as np
 from . import trajectory_output
 from .dynamics.units import DAY_S
 from .errors import DaddyError
-from .catalogue import list_cases, load_case, problem_from_case
+from .catalogue import list_cases, load_case, load_thrust_case, problem_from_case
 from .catalogue.free_time import ANGLE
 from .catalogue.revolutions import RevolutionSearch, search_revolutions
 from .catalogue.sail_cases import (SAIL_METHOD, SailCase, SailGuess, sail_options, solve_sail,
@@ -74,6 +74,18 @@ def _parser() -> argparse.ArgumentParser:
                    help="the search's final bracket in revolutions (default SPAN / 20)")
     s.add_argument("--quiet", action="store_true", help="no progress lines")
     sub.add_parser("list", help="list the catalogue cases")
+    q = sub.add_parser("predict", help="a case's terminal dispersion from an initial-state "
+                       "error: DA prediction beside a Monte Carlo (docs/policies.md)")
+    q.add_argument("case", help="case name or path to a .json file (Cartesian cases)")
+    q.add_argument("--energy", action="store_true", help="the energy optimum (default: fuel)")
+    q.add_argument("--policy", type=int, default=1, metavar="ORDER",
+                   help="fly the feedback laws of this order (0: the plan's controls)")
+    q.add_argument("--sigma-km", type=float, default=10.0, help="initial position error, "
+                   "1 sigma per axis [km]")
+    q.add_argument("--sigma-m-s", type=float, default=0.01, help="initial velocity error, "
+                   "1 sigma per axis [m/s]")
+    q.add_argument("--samples", type=int, default=2000, help="Monte Carlo flights")
+    q.add_argument("--seed", type=int, default=1)
     return ap
 
 
@@ -99,6 +111,8 @@ def main(argv=None) -> int:
         if measured_on(run_times):
             print(f"(expected run times {measured_on(run_times)}: bench/bench_catalogue.py)")
         return 0
+    if args.command == "predict":
+        return _predict(args)
     try:
         case = load_case(args.case)
         if isinstance(case, SailCase):
@@ -172,6 +186,20 @@ def main(argv=None) -> int:
     if not sol.converged:
         print(f"daddy: not converged: {sol.reason}", file=sys.stderr)
         return 1
+    return 0
+
+
+def _predict(args) -> int:
+    """``daddy predict`` (``prediction``): exit 0, or 2 for bad input / a case it cannot take."""
+    from .prediction import predict_case, report
+    try:
+        case = load_thrust_case(args.case)
+        r = predict_case(case, not args.energy, args.policy, args.sigma_km, args.sigma_m_s,
+                         args.samples, args.seed)
+    except DaddyError as exc:
+        print(f"daddy: error: {exc}", file=sys.stderr)
+        return 2
+    print(report(r))
     return 0
 
 

@@ -38,7 +38,7 @@ from .da.maps import compose, evaluate
 from .da.monomials import MAX_ORDER, tables
 from .errors import DaddyError
 from .problem import Problem
-from .throttle import thrust_of, throttle_form
+from .throttle import throttle_thrust, thrust_of, throttle_form
 
 ACTIVE_TOL = 1e-7   # a stage or terminal inequality above -ACTIVE_TOL counts as active
 # a stage's systems are solved only where their linear part's condition number leaves the law
@@ -93,6 +93,16 @@ class Policy:
             return self.U[k] + evaluate(law, x - self.X[k])
         batch = DA(law.c[:, :, None], law.T)                    # (nu, 1): one law, B points
         return self.U[k][:, None] + evaluate(batch, x - self.X[k][:, None])
+
+    def flown(self, k: int, dx: DA) -> DA:
+        """Stage k's control as the problem's step takes it (the thrust, for an exact fuel
+        form's laws) for a state deviation dx (DA (nx, 1) in any algebra): a polynomial of
+        dx's variables (``uncertainty``)."""
+        law = self.law(k)
+        if law is None:
+            raise DaddyError(f"policy: stage {k} has no feedback law")
+        v = compose(DA(law.c[:, :, None], law.T), dx) + self.U[k][:, None]
+        return v if self.frame is None else throttle_thrust(v, self.u_max, self.frame)[:3]
 
     def truncated(self, order: int) -> "Policy":
         """The same laws to a lower ``order``: the laws are truncated Taylor series, so this is

@@ -85,10 +85,10 @@ class ThrottleForm:
         control the dynamics read (``models.with_thrust_magnitude``'s layout)."""
         if len(v) > 3:        # prepared already
             return v
-        return _prepared_thrust(v, self.u_max, self.frame)
+        return throttle_thrust(v, self.u_max, self.frame)
 
 
-def _prepared_thrust(v, u_max: float, frame: np.ndarray):
+def throttle_thrust(v, u_max: float, frame: np.ndarray):
     """[u (3), |u|] = u_max s d(alpha, beta) and its magnitude, v = [s, alpha, beta]."""
     us = v[0] * u_max
     cb = dm.cos(v[2])
@@ -102,7 +102,7 @@ def thrust_of(V: np.ndarray, u_max: float, frame: np.ndarray) -> np.ndarray:
     """(B, 3) [s, alpha, beta] -> (B, 3) thrust (frame (3, 3): ``ThrottleForm.frame``); a
     throttle below zero (by a tolerance at most) is zero thrust."""
     S = np.column_stack([np.maximum(V[:, 0], 0.0), V[:, 1:3]])
-    return np.asarray(_prepared_thrust(S.T, u_max, frame), float)[:3].T
+    return np.asarray(throttle_thrust(S.T, u_max, frame), float)[:3].T
 
 
 def intermediate_stages(U: np.ndarray, u_max: float, tol: float = 1e-3) -> int:

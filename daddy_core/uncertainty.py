@@ -37,16 +37,33 @@ def terminal_polynomial(problem: Problem, X, U, policy=None, order: int = 2) -> 
     x = variables(X[0][:, None], order=order)                      # (nx, 1)
     dt, t0 = problem.stage_dt, problem.stage_t0
     for k in range(N):
-        u = constant(U[k][:, None], nx, order)                      # (nu, 1)
-        law = None if policy is None else policy.law(k)
-        if law is not None:
-            if law.order > order:
-                raise DaddyError(f"uncertainty: the policy's order {law.order} exceeds the "
+        if policy is not None and policy.has_law[k]:
+            if policy.order > order:
+                raise DaddyError(f"uncertainty: the policy's order {policy.order} exceeds the "
                                  f"propagation's {order}")
-            law = DA(law.c.reshape(law.c.shape + (1,)), law.T)         # (nu, 1)
-            u = u + compose(law, x - X[k][:, None])
+            u = policy.flown(k, x - X[k][:, None])                    # (nu, 1)
+        else:
+            u = constant(U[k][:, None], nx, order)
         x = problem.step(x, u, dt[k:k + 1], t0[k:k + 1])
     return x[:, 0] - X[-1]
+
+
+def monte_carlo(problem: Problem, X, U, policy, cov, samples: int,
+                rng: np.random.Generator) -> np.ndarray:
+    """The same flight as ``terminal_polynomial``'s, sampled: ``samples`` initial deviations
+    drawn from N(0, cov), each flown through the problem's stages (the laws where ``policy``
+    has them, unclipped, as the polynomial flies them). Returns the deviations (nx, S) and the
+    terminal deviations x_N - X_N (nx, S)."""
+    X, U = np.asarray(X, float), np.asarray(U, float)
+    dx0 = rng.multivariate_normal(np.zeros(problem.nx), cov, size=samples,
+                                  method="eigh").T
+    x = X[0][:, None] + dx0
+    for k in range(problem.N):
+        u = (policy.thrust(k, x) if policy is not None and policy.has_law[k]
+             else np.repeat(U[k][:, None], samples, axis=1))
+        x = problem.step(x, u, np.repeat(problem.stage_dt[k], samples),
+                         np.repeat(problem.stage_t0[k], samples))
+    return dx0, x - X[-1][:, None]
 
 
 def gaussian_moments(p: DA, cov) -> tuple[np.ndarray, np.ndarray]:
@@ -89,4 +106,4 @@ def _standard_normal_moments(exponents: np.ndarray) -> np.ndarray:
     return np.prod(table[0][exponents], axis=1)
 
 
-__all__ = ["terminal_polynomial", "gaussian_moments"]
+__all__ = ["terminal_polynomial", "monte_carlo", "gaussian_moments"]
