@@ -75,6 +75,13 @@ class Policy:
         """(N,) bool: the stages whose law exists."""
         return np.all(np.isfinite(self.coefficients), axis=(1, 2))
 
+    @property
+    def offset(self) -> float:
+        """The largest constant term of the laws: the control a law gives at the plan's own
+        state minus the plan's, 0 at an optimum. A plan that is not its problem's optimum (a
+        warm re-plan not polished) has laws that move away from it by this much at once."""
+        return float(np.nanmax(np.abs(self.coefficients[:, 0, :]), initial=0.0))
+
     def law(self, k: int) -> DA | None:
         """Stage k's law as a DA (nu,) in nx variables, or None."""
         if not self.has_law[k]:

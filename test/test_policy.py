@@ -53,6 +53,7 @@ def _coefficients(law, var, order):
 def test_the_first_stages_law_has_the_issues_taylor_coefficients(raise_policy):
     problem, sol, policy = raise_policy
     assert sol.cost == pytest.approx(0.0037561617, abs=1e-10)
+    assert policy.offset < 1e-8          # the solution is the laws' stationary point
     np.testing.assert_allclose(sol.U[0], [-0.00345770, 0.01781139], atol=1e-8)
     c = _coefficients(policy.law(0), 0, 3)          # along the radial position
     np.testing.assert_allclose(c[0], [0.0028946, -0.0745348], rtol=0, atol=1e-6)
