@@ -35,8 +35,8 @@ class StageStep:
 
     Wraps a plain function f(x, u, dt) of an autonomous system (``Problem`` wraps any callable
     given as ``step``; it does not see t0; the library's own wrappers of a step, e.g. the
-    static parameters', pass t0 on: ``takes_t0``); ``FlowStep`` integrates a continuous right-hand side
-    rhs(t, x, u) from t0 and serves both ways faster. The stage start matters where the
+    static parameters', pass t0 on: ``takes_t0``); ``FlowStep`` integrates a continuous
+    right-hand side rhs(t, x, u) from t0 and serves both ways faster. The stage start matters where the
     dynamics depend on the independent variable, e.g. the true longitude of Sundman-transformed
     Earth-centred stages (``models.equinoctial_sundman``).
     """

@@ -240,15 +240,18 @@ class _TimeView:
         return dt * dm.exp(omega[0])
 
     def independent(self, t, omega):
-        """The independent variable flown at the grid's t: origin + (t - origin) exp(theta)."""
-        return self.origin + (t - self.origin) * dm.exp(omega[0])
+        return self._flown(t, dm.exp(omega[0]))
+
+    def _flown(self, t, stretch):
+        """The independent variable flown at the grid's t: origin + (t - origin) T / T_ref."""
+        return self.origin + (t - self.origin) * stretch
 
     def rates(self, rhs, t, y, u, nx):
         if type(y) is list:   # a single float state as a list (Dynamics.scalar_components)
             e = math.exp(y[nx])
-            return [float(d) * e for d in rhs(self.origin + (t - self.origin) * e, y[:nx], u)]
+            return [float(d) * e for d in rhs(self._flown(t, e), y[:nx], u)]
         e = dm.exp(y[nx])
-        return dm.stack(list(rhs(self.origin + (t - self.origin) * e, y[:nx], u))) * e
+        return dm.stack(list(rhs(self._flown(t, e), y[:nx], u))) * e
 
     def terminal(self, cost, x, omega, x_target):
         return (cost(x, self.target(x_target, omega))
@@ -329,8 +332,8 @@ def _augmented(p: Problem, params: tuple, view, report: Callable | None = None,
     guess = np.array([q.guess for q in params])
     return replace(p, x0=np.concatenate([p.x0, guess, [1.0]]),
                    x_target=np.concatenate([p.x_target, guess, [0.0]]),
-                   step=StageStep(step, takes_t0=True), stage_cost=stage_cost, terminal_cost=terminal_cost,
-                   g_ineq=g_ineq, g_eq=g_eq, g_tineq=terminal(p.g_tineq),
+                   step=StageStep(step, takes_t0=True), stage_cost=stage_cost,
+                   terminal_cost=terminal_cost, g_ineq=g_ineq, g_eq=g_eq, g_tineq=terminal(p.g_tineq),
                    g_teq=terminal(p.g_teq), nu=nu + n, labels=labels, parameters=lay,
                    rhs=None)
 

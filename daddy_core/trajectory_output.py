@@ -163,7 +163,8 @@ def write_rows(header: list[str], rows: np.ndarray, path: str | Path,
     empty fields for NaN."""
     lines = [",".join(header)]
     for r in rows:
-        lines.append(",".join(str(int(v)) if j < index_columns else ("" if math.isnan(v) else repr(float(v)))
+        lines.append(",".join(str(int(v)) if j < index_columns
+                              else ("" if math.isnan(v) else repr(float(v)))
                               for j, v in enumerate(r)))
     Path(path).write_text("\n".join(lines) + "\n")
 

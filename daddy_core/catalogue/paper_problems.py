@@ -6,7 +6,6 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass
 
-
 from ..da import functions as dm
 from ..errors import DaddyError
 from ..fuel import FuelStageCost, pseudo_huber_stage_cost

@@ -11,7 +11,7 @@ import numpy as np
 
 from ..errors import DaddyError
 from .core import DA, _mul
-from .monomials import MonomialTables
+from .monomials import MonomialTables, tables
 
 
 _ONE = np.ones(1)
@@ -85,13 +85,13 @@ def compose(p: DA, g: DA) -> DA:
     mono[0, 0] = 1.0
     mono[:, 1:T.n + 1] = g.c
     sparse = _sparse_components(g.c, G)
+    dense = [v for v in range(T.n) if v not in sparse]
     for d in range(2, T.k + 1):
         b = T.block[d]
         if not sparse:
             mono[:, b] = _mul(mono[:, T.parent[b]], g.c[:, T.parent_var[b]], G)
             continue
         cols = np.arange(b.start, b.stop)
-        dense = [v for v in range(T.n) if v not in sparse]
         at = cols[np.isin(T.parent_var[b], dense)]
         if at.size:
             mono[:, at] = _mul(mono[:, T.parent[at]], g.c[:, T.parent_var[at]], G)
@@ -140,7 +140,6 @@ def _times_sparse(a: np.ndarray, b: np.ndarray, nz: np.ndarray, G: MonomialTable
 @functools.lru_cache(maxsize=None)
 def _shifts(n: int, k: int, q: int) -> tuple:
     """(source, target): monomial source times monomial q is monomial target (degree <= k)."""
-    from .monomials import tables
     T = tables(n, k)
     hit = T.pair_j == q
     return T.pair_i[hit], T.pair_target[hit]

@@ -252,7 +252,7 @@ class RunOptions(_Group):
 class PolicyOptions(_Group):
     """The feedback laws a converged solve returns (``daddy_core.policy``)."""
 
-    order: int = 0                    # the laws' order, 1-5, from stage maps one order higher (0: none)
+    order: int = 0                    # the laws' order, 1-5 (stage maps one order higher); 0: none
 
     def __post_init__(self):
         if isinstance(self.order, bool) or self.order not in range(0, 6):

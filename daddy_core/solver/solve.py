@@ -15,12 +15,12 @@ from dataclasses import replace
 
 import numpy as np
 
-from ..path_constraints import violated_at_start
 from ..errors import DaddyError
+from ..path_constraints import violated_at_start
 from ..phases import phase_report
 from ..policy import feedback_policy, fuel_policy
-from ..throttle import has_throttle_form
 from ..problem import Problem
+from ..throttle import has_throttle_form
 from . import end_game, path_exchange
 from .assemble import repropagation_miss, solution, unsolved
 from .context import Clock, SolveContext
