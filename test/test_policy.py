@@ -211,3 +211,16 @@ def test_fuel_laws_of_a_bang_bang_optimum_correct_the_plan_after_a_dispersion():
             law = max(np.abs(policy.thrust(k, again.X[k]) - again.U[k]).max() for k in laws)
             plan = max(np.abs(sol.U[k] - again.U[k]).max() for k in laws)
             assert law * 4 < plan, (var, delta, law, plan)
+
+
+def test_a_fuel_solve_without_the_exact_end_game_gets_the_laws_of_the_problem_it_solved():
+    """Earth-Mars fuel-optimal without polishing ends at the pseudo-Huber step (no exact fuel
+    form ran): its laws are that problem's (controls = thrust), not the exact form's."""
+    from daddy_core.catalogue import load_case, problem_from_case
+    from daddy_core.solver import case_options
+    case = load_case("earth_mars")
+    problem = problem_from_case(case)
+    sol = solve(problem, case.cold_guess(problem.N), fuel_optimal=True, polish=False,
+                options=case_options(case, True, policy=dict(order=1)))
+    assert not sol.exact_fuel
+    assert sol.policy is not None and sol.policy.frame is None

@@ -126,7 +126,7 @@ def solution(ctx: SolveContext, game: Game, case_name: str | None) -> Solution:
                    **{k: t.get(k, 0.0) for k in ("repropagation", "optimality", "kkt")}},
         history=hres.history, polynomial_share=stats.polynomial_share, violations=violations,
         duals=duals(problem, X, U, opt, hres, opts, end.form), rho=float(hres.rho),
-        stage_maps=end.maps)
+        stage_maps=end.maps, exact_fuel=end.form is not None)
 
 
 def _verdict(ctx: SolveContext, game: Game, gmax: float, miss: float | None,

@@ -24,6 +24,8 @@ class Solution:
 
     Attributes:
         case, method, fuel_optimal, converged, reason: what was solved and how it ended.
+        exact_fuel: the answer is the exact fuel form's optimum (``throttle``: the end game's
+            throttle/direction form), not the last pseudo-Huber step's.
         X: (N+1, nx) states; U: (N, nu) controls; stage_dt: (N,) stage lengths (durations, or
             angles for Sundman-transformed stages); t_start: where stage 0 starts in the
             independent variable (``Problem.t_start``).
@@ -90,6 +92,7 @@ class Solution:
     min_path_margin: float | None = None
     parameters: dict | None = None   # static parameters {name: value} (``static_parameters``)
     phases: list | None = None   # a multi-phase problem's phases (``phases.phase_report``)
+    exact_fuel: bool = False
     # feedback laws (``options.policy.order``; ``daddy_core.policy``), or why they were not built
     policy: Policy | None = field(default=None, repr=False, compare=False)
     policy_error: str | None = None

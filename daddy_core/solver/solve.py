@@ -20,7 +20,6 @@ from ..path_constraints import violated_at_start
 from ..phases import phase_report
 from ..policy import feedback_policy, fuel_policy
 from ..problem import Problem
-from ..throttle import has_throttle_form
 from . import end_game, path_exchange
 from .assemble import repropagation_miss, solution, unsolved
 from .context import Clock, SolveContext
@@ -57,12 +56,11 @@ def solve(problem: Problem, u_guess=None, method: Method | str = Method.DYN,
     if layout is not None:   # static parameters (``static_parameters``): the user's guess padded
         u_guess = _padded_guess(layout, u_guess)
     sol = _solve(problem, u_guess, method, fuel_optimal, polish, options, case_name, progress)
-    opts = options or SolverOptions()
-    order = opts.policy.order
+    order = (options or SolverOptions()).policy.order
     if layout is None:
-        if order:   # a fuel optimum in the exact form has the form's laws (``policy``)
-            exact = sol.fuel_optimal and opts.end_game.exact_fuel and has_throttle_form(problem)
-            _attach_policy(problem, sol, order, fuel_policy if exact else feedback_policy)
+        if order:   # an exact fuel optimum has its form's laws (``policy``)
+            _attach_policy(problem, sol, order,
+                           fuel_policy if sol.exact_fuel else feedback_policy)
         return sol
     if order:
         sol.policy_error = "feedback laws are not built for static-parameter problems yet"
