@@ -37,7 +37,7 @@ from .da.core import DA, _wrap, variables
 from .da.maps import compose, evaluate
 from .da.monomials import MAX_ORDER, tables
 from .errors import DaddyError
-from .problem import Problem
+from .problem import Problem, StageStep
 from .throttle import throttle_thrust, thrust_of, throttle_form
 
 ACTIVE_TOL = 1e-7   # a stage or terminal inequality above -ACTIVE_TOL counts as active
@@ -118,7 +118,7 @@ class Policy:
             raise DaddyError(f"policy: a truncation order must be in [1, {self.order}], got "
                              f"{order!r}")
         T = tables(self.nx, order)
-        return Policy(order, self.X, self.U, self.coefficients[:, :T.size].copy())
+        return replace(self, order=order, coefficients=self.coefficients[:, :T.size].copy())
 
     def thrust(self, k: int, x) -> np.ndarray:
         """The problem's control of stage k for the state x (as ``control`` takes it): the
@@ -166,17 +166,83 @@ def feedback_policy(problem: Problem, sol, order: int = 2, hom=None) -> Policy:
 
     ``hom``: the stage cost's homotopy argument (default: the last step the solve ran,
     ``sol.fuel_step``, or the energy step)."""
+    X, U = _checked(problem, sol.X, sol.U, order)
+    hom = (sol.fuel_step or (0.0, 1.0)) if hom is None else hom
+    lam = _terminal_multipliers(problem, X, U, sol.duals)
+    laws = _sweep(problem, X, U, lam, _active_rows(problem, X, U), hom, order)
+    return Policy(order, X.copy(), U.copy(), laws)
+
+
+def tracking_policy(problem: Problem, X, U, order: int = 1) -> Policy:
+    """The neighbouring laws of any plan (X, U) of ``problem`` that meets its terminal
+    equalities, optimal or not (a warm re-plan stopped by its budget): for a state deviation at
+    stage k, the controls of the remaining stages that still meet the terminal equalities with
+    the least correction sum_j |u_j - U_j|^2 dt_j / dt_mean -- the backward sweep of
+    ``feedback_policy`` on that tracking problem, whose optimum is the plan itself (multipliers
+    0), so the laws' constant terms (``Policy.offset``) are the least correction that closes
+    the plan's own terminal residual, 0 for a plan that meets it.
+
+    The stage constraints (thrust bound, path rows) are not held: the laws are for the small
+    deviations between re-plans, and a user clips their control to its bounds. ``problem``'s
+    cost and stage constraints are not used; its terminal inequalities must be inactive
+    (``feedback_policy``).
+
+    Args:
+        problem: the plan's problem (its dynamics, stage grid and terminal equalities).
+        X: (N+1, nx) the plan's states; U: (N, nu) its controls.
+        order: the laws' order (stage maps of order + 1).
+    """
+    X, U = _checked(problem, X, U, order)
+    tracking = tracking_problem(problem, U)
+    lam = np.zeros(_terminal_rows(tracking, X, np.zeros_like(U))[1])
+    laws = _sweep(tracking, X, np.zeros_like(U), lam, [[] for _ in range(problem.N)],
+                  (0.0, 1.0), order)
+    return Policy(order, X.copy(), U.copy(), laws)
+
+
+def tracking_problem(problem: Problem, U) -> Problem:
+    """The problem of ``tracking_policy``: its control is the correction v_j = u_j - U_j to
+    the plan's controls U (N, nu) (the stage found from the step's t0), its cost
+    sum_j |v_j|^2 dt_j / dt_mean; no terminal cost, no stage constraints. v = 0 is the plan."""
+    U = np.asarray(U, float)
+    t0s, dt = problem.stage_t0, problem.stage_dt
+    edges = t0s[1:] - 0.5 * dt[:-1]          # a stage's t0 is nearest its own start
+    step, dt_mean = problem.step, float(np.mean(dt))
+
+    def corrected(x, v, d, t0):
+        ref = U[np.searchsorted(edges, t0)].T           # (nu,) or (nu, B)
+        return step(x, v + (ref[:, None] if ref.ndim == 1 else ref), d, t0)
+
+    def correction(x, v, d, hom=(0.0, 1.0)):
+        return sum(v[i] * v[i] for i in range(problem.nu)) * (d / dt_mean)
+
+    return replace(problem, step=StageStep(corrected, takes_t0=True), stage_cost=correction, terminal_cost=_no_cost,
+                   g_ineq=None, g_eq=None, g_path=None, rhs=None, u_max=None)
+
+
+def _checked(problem: Problem, X, U, order: int) -> tuple[np.ndarray, np.ndarray]:
+    """X, U as float arrays of the problem's shapes, and the order in range; else DaddyError."""
     if not (isinstance(order, int) and 1 <= order <= MAX_ORDER - 1):
         raise DaddyError(f"policy order must be an integer in [1, {MAX_ORDER - 1}], got {order!r}")
-    k = order + 1
-    X, U = np.asarray(sol.X, float), np.asarray(sol.U, float)
+    X, U = np.asarray(X, float), np.asarray(U, float)
     nx, nu, N = problem.nx, problem.nu, problem.N
     if X.shape != (N + 1, nx) or U.shape != (N, nu):
         raise DaddyError(f"policy: the solution's X {X.shape} / U {U.shape} are not this "
                          f"problem's ({N + 1}, {nx}) / ({N}, {nu})")
-    hom = (sol.fuel_step or (0.0, 1.0)) if hom is None else hom
-    lam = _terminal_multipliers(problem, X, U, sol.duals)
-    active = _active_rows(problem, X, U)
+    return X, U
+
+
+def _no_cost(x, x_target):
+    return 0.0 * x[0]
+
+
+def _sweep(problem: Problem, X: np.ndarray, U: np.ndarray, lam: np.ndarray, active: list,
+           hom, order: int) -> np.ndarray:
+    """The backward sweep of the module docstring about (X, U) with the terminal multipliers
+    ``lam`` (of ``g_teq``) and each stage's held rows ``active``: the laws' coefficients
+    (``Policy.coefficients``)."""
+    k = order + 1
+    nx, nu, N = problem.nx, problem.nu, problem.N
     nl, m = lam.size, max(map(len, active), default=0)
     n = nx + nu + m + nl
     if n > 64:
@@ -203,7 +269,7 @@ def feedback_policy(problem: Problem, sol, order: int = 2, hom=None) -> Policy:
         law = _with_multipliers(V, du, ident, nx, nu + m, nl)
         if law is not None:
             laws[j] = _restrict(law, nx, order).c
-    return Policy(order, X.copy(), U.copy(), laws)
+    return laws
 
 
 def _stationary(Q: DA, ident: DA, solve: list, hold: list = ()) -> DA:
@@ -284,14 +350,19 @@ def _terminal_lagrangian(problem: Problem, xN: np.ndarray, lam: np.ndarray, k: i
     return V
 
 
-def _terminal_multipliers(problem: Problem, X, U, duals) -> np.ndarray:
-    """The solution's multipliers of ``g_teq``; refuses active terminal inequalities (module
-    docstring)."""
+def _terminal_rows(problem: Problem, X, U) -> tuple[int, int]:
+    """(inequalities, equalities) of the terminal constraints; refuses active terminal
+    inequalities (module docstring)."""
     _, _, gt, nti = problem.constraint_values(X, U)
     if gt is not None and nti and np.any(gt[:nti] > -ACTIVE_TOL):
         raise DaddyError("policy: a terminal inequality (g_tineq) is active; feedback laws are "
                          "built for terminal equalities (g_teq)")
-    nte = 0 if gt is None else gt.shape[0] - nti
+    return nti, 0 if gt is None else gt.shape[0] - nti
+
+
+def _terminal_multipliers(problem: Problem, X, U, duals) -> np.ndarray:
+    """The solution's multipliers of ``g_teq`` (``_terminal_rows``)."""
+    nti, nte = _terminal_rows(problem, X, U)
     lam_t = np.asarray((duals or {}).get("lam_t", []), float)
     if lam_t.size != nti + nte:
         raise DaddyError(f"policy: the solution has {lam_t.size} terminal multipliers, the "
@@ -314,4 +385,5 @@ def _restriction(n: int, k: int, m: int, order: int) -> np.ndarray:
                      for e in tables(m, order).exponents.tolist()], int)
 
 
-__all__ = ["Policy", "feedback_policy"]
+__all__ = ["Policy", "feedback_policy", "fuel_policy", "tracking_policy",
+           "tracking_problem"]

@@ -2,13 +2,15 @@
 raise: the law of the first stage against the issue's Taylor coefficients of the re-optimised
 control, and against re-solves of perturbed problems in this test (its error falls by at least
 5x per order); an LQ problem's law against its closed form; refusals named."""
+from dataclasses import replace
+
 import numpy as np
 import pytest
 
 from daddy_core.da import functions as dm
 from daddy_core.dynamics import Dynamics
 from daddy_core.errors import DaddyError
-from daddy_core.policy import Policy, feedback_policy
+from daddy_core.policy import Policy, feedback_policy, tracking_policy, tracking_problem
 from daddy_core.problem import Problem, flow_step
 from daddy_core.solver import Solution, SolverOptions, solve
 
@@ -224,3 +226,55 @@ def test_a_fuel_solve_without_the_exact_end_game_gets_the_laws_of_the_problem_it
                 options=case_options(case, True, policy=dict(order=1)))
     assert not sol.exact_fuel
     assert sol.policy is not None and sol.policy.frame is None
+
+
+@pytest.fixture(scope="module")
+def raise_plan():
+    """A plan of the orbit raise that meets its terminal rows but is not its optimum: the
+    optimum of another cost, (u_r^2 + 9 u_t^2) dt (a warm re-plan stopped early is such a
+    plan)."""
+    problem = _orbit_raise([1.0, 0.0, 0.0, 1.0])
+    other = replace(problem, stage_cost=lambda x, u, dt, hom: (u[0] * u[0] + 9 * u[1] * u[1]) * dt)
+    sol = solve(other, np.full((40, 2), 1e-3), options=TIGHT)
+    assert sol.max_violation < 1e-12
+    return problem, sol
+
+
+@pytest.mark.parametrize("var", [0, 3])
+def test_tracking_laws_are_the_least_correction_of_any_feasible_plan(raise_plan, var):
+    """The tracking laws of a plan that is not the problem's optimum have no constant term
+    (feedback_policy's laws would jump towards the optimum), and their first control is the
+    re-solved least-correction problem's to an error falling >= 5x per order."""
+    problem, sol = raise_plan
+    policy = tracking_policy(problem, sol.X, sol.U, order=3)
+    assert policy.offset < 1e-10
+    errors = np.zeros(3)
+    for delta in (0.003, -0.003):
+        x0 = problem.x0.copy()
+        x0[var] += delta
+        again = solve(tracking_problem(_orbit_raise(x0), sol.U), np.zeros((40, 2)), options=TIGHT)
+        assert again.max_violation < 1e-10
+        for i, order in enumerate((1, 2, 3)):
+            u = policy.truncated(order).control(0, x0)
+            errors[i] = max(errors[i], np.abs(u - (sol.U[0] + again.U[0])).max())
+    assert errors[0] < 2e-5
+    assert errors[0] >= 5 * errors[1] and errors[1] >= 5 * errors[2]
+
+
+def test_flying_tracking_laws_stage_by_stage_meets_the_terminal_rows(raise_plan):
+    """Flown in closed loop from a perturbed start (the last stage, which cannot move three
+    terminal rows alone, has no law and flies the plan), the order-2 laws end >= 50x nearer
+    the target orbit than the plan flown open loop."""
+    problem, sol = raise_plan
+    policy = tracking_policy(problem, sol.X, sol.U, order=2)
+    assert policy.has_law[:-1].all() and not policy.has_law[-1]
+    for delta in (0.003, -0.003):
+        x = problem.x0 + np.array([delta, 0.0, 0.0, 0.0])
+        open_loop = x.copy()
+        for k in range(problem.N):
+            u = policy.control(k, x) if policy.has_law[k] else sol.U[k]
+            x = problem.step.flow(x, u, problem.stage_dt[k], problem.stage_t0[k])
+            open_loop = problem.step.flow(open_loop, sol.U[k], problem.stage_dt[k],
+                                          problem.stage_t0[k])
+        miss = np.abs(_on_circle(x, None)).max()
+        assert miss * 50 < np.abs(_on_circle(open_loop, None)).max()
