@@ -92,6 +92,7 @@ class Plan:
     max_violation: float = 0.0
     thrust_bound_n: float = 0.0
     thrust_rtn: bool = False
+    law_stages: set = field(default_factory=set)   # stages whose thrust a feedback law set
 
     @classmethod
     def of(cls, sol: Solution, X: np.ndarray, epoch_s: float, units: Units, thrust_bound: float,
@@ -128,13 +129,24 @@ class Plan:
     def end_s(self) -> float:
         return self.epoch_s + float(np.sum(self.stage_dt_s))
 
+    def stage_index(self, t_s: float) -> int | None:
+        """The stage containing time t (a time on a stage boundary opens the stage), or None
+        before the epoch or after the end."""
+        rel = t_s - self.epoch_s + TIME_TOLERANCE_S
+        if rel < 0 or t_s + TIME_TOLERANCE_S >= self.end_s:
+            return None
+        k = int(np.searchsorted(np.cumsum(self.stage_dt_s), rel, side="right"))
+        return min(k, len(self.thrust_n) - 1)
+
     def thrust_at(self, t_s: float) -> np.ndarray:
         """Thrust [N] of the stage containing time t (zero before the epoch or after the end)."""
-        rel = t_s - self.epoch_s + TIME_TOLERANCE_S  # a time on a stage boundary opens the stage
-        if rel < 0 or t_s + TIME_TOLERANCE_S >= self.end_s:
-            return np.zeros(3)
-        k = int(np.searchsorted(np.cumsum(self.stage_dt_s), rel, side="right"))
-        return self.thrust_n[min(k, len(self.thrust_n) - 1)].copy()
+        k = self.stage_index(t_s)
+        return np.zeros(3) if k is None else self.thrust_n[k].copy()
+
+    def fly_law(self, k: int, thrust_n: np.ndarray) -> None:
+        """Stage k flies ``thrust_n`` [N], a feedback law's (``daddy_ros.feedback``)."""
+        self.thrust_n[k] = thrust_n
+        self.law_stages.add(k)
 
     def command_at(self, t_s: float, pos_m, vel_m_s) -> np.ndarray:
         """The thrust command [N] at time t in the scenario's frame, for a spacecraft at

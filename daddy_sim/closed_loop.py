@@ -12,6 +12,7 @@ from daddy_core.errors import DaddyError
 
 from daddy_ros.checks import InputRejected
 from daddy_ros.config import TriggerConfig, bundled_plan
+from daddy_ros.feedback import FeedbackLaws
 from daddy_ros.planner import GuidancePlanner
 from daddy_ros.self_trigger import Reason, ReplanTrigger
 from .sim import T0_S, TruthSim
@@ -25,16 +26,25 @@ class DirectLink:
     def __init__(self, planner: GuidancePlanner, policy: TriggerConfig):
         self.planner = planner
         self.trigger = ReplanTrigger.for_planner(planner, policy)
+        self.laws = FeedbackLaws.for_planner(planner, policy)
+        self.served: list = []   # the stage-boundary re-plans a feedback law served instead
 
     def estimate(self, pos, vel, mass, t_s, rid):
         """An estimate, as the node takes it: (reason, level, latency s) of the re-plan it
-        triggered, or None."""
+        triggered, or None (also when a feedback law served it: ``served``)."""
         if self.trigger is None:
             return None
-        reason = self.trigger.observe(t_s, pos, vel, mass, self.planner.plan)
+        plan = self.planner.plan
+        reason = self.trigger.observe(t_s, pos, vel, mass, plan)
         if reason is None:
             return None
         self.trigger.replanned(t_s, pos, vel, mass)
+        if reason is Reason.STAGE and self.laws is not None:
+            self.laws.prepare(plan)   # (the node's worker builds them after each new plan)
+            served = self.laws.serve(plan, t_s, pos, vel, mass)
+            if served is not None:
+                self.served.append(served)
+                return None
         t0 = time.perf_counter()
         try:
             level = self.planner.replan(pos, vel, mass, t_s, rid, now_s=t_s).level
@@ -112,6 +122,8 @@ def fly(link, sim: TruthSim, planner: GuidancePlanner, policy: TriggerConfig, su
     m_final = sim.truth_si()[2]
     return {"miss_km": miss_r / 1e3, "miss_cm_s": miss_v * 100, "final_mass_kg": m_final,
             "replans": len(latencies), "triggered": triggered,
+            "laws_served": len(getattr(link, "served", ())),
+            "law_eval_ms": [1e3 * s.evaluation_s for s in getattr(link, "served", ())],
             "latency_ms": [1e3 * x for x in latencies],
             "levels": levels, "flown_m": np.array(flown), "thrust_log": np.array(thrust_log)}
 

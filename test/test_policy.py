@@ -278,3 +278,17 @@ def test_flying_tracking_laws_stage_by_stage_meets_the_terminal_rows(raise_plan)
                                           problem.stage_t0[k])
         miss = np.abs(_on_circle(x, None)).max()
         assert miss * 50 < np.abs(_on_circle(open_loop, None)).max()
+
+
+def test_the_matrix_sweep_of_order_1_laws_is_the_da_sweep(raise_policy, raise_plan, monkeypatch):
+    """Order-1 laws without held rows are swept on matrices (``policy._sweep_quadratic``): the
+    same laws as the DA sweep, optimal and tracking."""
+    import daddy_core.policy as policy_module
+    problem, sol, _ = raise_policy
+    _, plan = raise_plan
+    fast = [feedback_policy(problem, sol, 1), tracking_policy(problem, plan.X, plan.U, 1)]
+    monkeypatch.setattr(policy_module, "_sweep_quadratic", lambda *args: None)
+    slow = [feedback_policy(problem, sol, 1), tracking_policy(problem, plan.X, plan.U, 1)]
+    for a, b in zip(fast, slow):
+        np.testing.assert_array_equal(a.has_law, b.has_law)
+        np.testing.assert_allclose(a.coefficients, b.coefficients, rtol=1e-9, atol=1e-12)
