@@ -177,10 +177,10 @@ def tracking_policy(problem: Problem, X, U, order: int = 1) -> Policy:
     """The neighbouring laws of any plan (X, U) of ``problem`` that meets its terminal
     equalities, optimal or not (a warm re-plan stopped by its budget): for a state deviation at
     stage k, the controls of the remaining stages that still meet the terminal equalities with
-    the least correction sum_j |u_j - U_j|^2 dt_j / dt_mean -- the backward sweep of
-    ``feedback_policy`` on that tracking problem, whose optimum is the plan itself (multipliers
-    0), so the laws' constant terms (``Policy.offset``) are the least correction that closes
-    the plan's own terminal residual, 0 for a plan that meets it.
+    the least correction sum_j |u_j - U_j|^2 / s_j^2 dt_j / dt_mean (``tracking_problem``) --
+    the backward sweep of ``feedback_policy`` on that problem, whose optimum is the plan itself
+    (multipliers 0), so the laws' constant terms (``Policy.offset``) are the least correction
+    that closes the plan's own terminal residual, 0 for a plan that meets it.
 
     The stage constraints (thrust bound, path rows) are not held: the laws are for the small
     deviations between re-plans, and a user clips their control to its bounds. ``problem``'s
@@ -188,36 +188,54 @@ def tracking_policy(problem: Problem, X, U, order: int = 1) -> Policy:
     (``feedback_policy``).
 
     Args:
-        problem: the plan's problem (its dynamics, stage grid and terminal equalities).
+        problem: the plan's problem (its dynamics, stage grid, terminal equalities, u_max).
         X: (N+1, nx) the plan's states; U: (N, nu) its controls.
         order: the laws' order (stage maps of order + 1).
     """
     X, U = _checked(problem, X, U, order)
     tracking = tracking_problem(problem, U)
-    lam = np.zeros(_terminal_rows(tracking, X, np.zeros_like(U))[1])
-    laws = _sweep(tracking, X, np.zeros_like(U), lam, [[] for _ in range(problem.N)],
-                  (0.0, 1.0), order)
-    return Policy(order, X.copy(), U.copy(), laws)
+    V = np.zeros_like(U)
+    lam = np.zeros(_terminal_rows(tracking, X, V)[1])
+    laws = _sweep(tracking, X, V, lam, [[] for _ in range(problem.N)], (0.0, 1.0), order)
+    return Policy(order, X.copy(), U.copy(), laws * correction_scale(problem, U)[:, None, None])
 
 
 def tracking_problem(problem: Problem, U) -> Problem:
-    """The problem of ``tracking_policy``: its control is the correction v_j = u_j - U_j to
-    the plan's controls U (N, nu) (the stage found from the step's t0), its cost
-    sum_j |v_j|^2 dt_j / dt_mean; no terminal cost, no stage constraints. v = 0 is the plan."""
+    """The problem of ``tracking_policy``: its control is the scaled correction
+    v_j = (u_j - U_j) / s_j to the plan's controls U (N, nu), the stage found from the step's
+    t0; its cost sum_j |v_j|^2 dt_j / dt_mean; no terminal cost, no stage constraints. v = 0 is
+    the plan. With a thrust bound u_max, s_j = max(|U_j| / u_max, floor) (at most 1; floor:
+    ``NewtonOptions.control_weight_floor``), the weights of Newton's minimum-norm steps: a
+    correction goes to the thrust arcs, where a change of direction costs no propellant to
+    first order, and the coasting arcs keep coasting; without one, s_j = 1."""
     U = np.asarray(U, float)
+    scale = correction_scale(problem, U)[:, None]
     t0s, dt = problem.stage_t0, problem.stage_dt
     edges = t0s[1:] - 0.5 * dt[:-1]          # a stage's t0 is nearest its own start
     step, dt_mean = problem.step, float(np.mean(dt))
 
     def corrected(x, v, d, t0):
-        ref = U[np.searchsorted(edges, t0)].T           # (nu,) or (nu, B)
-        return step(x, v + (ref[:, None] if ref.ndim == 1 else ref), d, t0)
+        at = np.searchsorted(edges, t0)
+        ref, s = U[at].T, scale[at].T                   # (nu,) or (nu, B); (1,) or (1, B)
+        if ref.ndim == 1:
+            ref, s = ref[:, None], s[:, None]
+        return step(x, v * s + ref, d, t0)
 
     def correction(x, v, d, hom=(0.0, 1.0)):
         return sum(v[i] * v[i] for i in range(problem.nu)) * (d / dt_mean)
 
-    return replace(problem, step=StageStep(corrected, takes_t0=True), stage_cost=correction, terminal_cost=_no_cost,
-                   g_ineq=None, g_eq=None, g_path=None, rhs=None, u_max=None)
+    return replace(problem, step=StageStep(corrected, takes_t0=True), stage_cost=correction,
+                   terminal_cost=_no_cost, g_ineq=None, g_eq=None, g_path=None, rhs=None,
+                   u_max=None)
+
+
+def correction_scale(problem: Problem, U: np.ndarray) -> np.ndarray:
+    """(N,) the correction scale s_j of ``tracking_problem``."""
+    from .solver.newton import control_scale        # (the solver's package imports this one)
+    from .solver.options import NewtonOptions
+    if not problem.u_max:
+        return np.ones(problem.N)
+    return control_scale(U, problem.u_max, NewtonOptions().control_weight_floor)
 
 
 def _checked(problem: Problem, X, U, order: int) -> tuple[np.ndarray, np.ndarray]:
@@ -449,5 +467,5 @@ def _restriction(n: int, k: int, m: int, order: int) -> np.ndarray:
                      for e in tables(m, order).exponents.tolist()], int)
 
 
-__all__ = ["Policy", "feedback_policy", "fuel_policy", "tracking_policy",
+__all__ = ["Policy", "feedback_policy", "fuel_policy", "tracking_policy", "correction_scale",
            "tracking_problem"]

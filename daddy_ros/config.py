@@ -104,11 +104,11 @@ class TriggerConfig:
     feedback_order: int = option(0, "at a stage-boundary re-plan, fly the plan's feedback law "
                                     "of this order instead where the estimate is near the plan "
                                     "(feedback_position_m, feedback_velocity_m_s; 0: always "
-                                    "re-plan; docs/policies.md)", bounds=(0, 3))
-    feedback_position_m: float = option(5000.0, "a feedback law is flown only within this "
+                                    "re-plan; docs/policies.md)", bounds=(0, 1))
+    feedback_position_m: float = option(20000.0, "a feedback law is flown only within this "
                                                 "distance of the plan's state [m]",
                                         bounds=(0.0, 1e9))
-    feedback_velocity_m_s: float = option(0.05, "... and within this speed of it [m/s]",
+    feedback_velocity_m_s: float = option(0.2, "... and within this speed of it [m/s]",
                                           bounds=(0.0, 1e9))
 
 

@@ -15,9 +15,9 @@ spacecraft's rating.
 Validity: the estimate, taken back to the stage's start with the stage's thrust, lies within
 ``feedback_position_m`` / ``feedback_velocity_m_s`` of the plan's state there (the laws are
 Taylor series about the plan), and the stage has a law (the last stages, which cannot move
-every terminal row, have none). The laws of a plan are built once (``prepare``: the node's
-worker does it after each new plan, off the estimate path); a plan whose laws are not built
-yet, or cannot be, is re-planned as before. Cartesian scenarios only (an Earth-centred plan's
+every terminal row, have none); a plan whose laws cannot be built is re-planned as before. The
+laws of a plan are built once (~25 ms for the halo's 110 stages): by the node's worker after
+each new plan (``prepare``), else at the first stage boundary that asks. Cartesian scenarios only (an Earth-centred plan's
 thrust is in RTN on equinoctial stages).
 """
 from __future__ import annotations
@@ -52,7 +52,7 @@ class FeedbackLaws:
     def __init__(self, planner, order: int, position_m: float, velocity_m_s: float):
         self.planner, self.order = planner, int(order)
         self.position_m, self.velocity_m_s = position_m, velocity_m_s
-        self._built: tuple[int, Policy | None] | None = None   # (id of the plan's solution, laws)
+        self._built: tuple | None = None   # (the plan's solution, its laws or None)
         self._lock = threading.Lock()
 
     @classmethod
@@ -66,7 +66,7 @@ class FeedbackLaws:
     def prepare(self, plan: Plan | None) -> None:
         """Build the laws of ``plan`` (the one in force; earlier plans' are dropped)."""
         if plan is not None and not plan.thrust_rtn:
-            self._policy(plan, build=True)
+            self._policy(plan)
 
     def serve(self, plan: Plan, t_s: float, pos_m, vel_m_s, mass_kg: float) -> Served | None:
         """Fly the law of the stage holding t_s if the estimate is inside its validity: the
@@ -74,7 +74,7 @@ class FeedbackLaws:
         if plan.thrust_rtn:
             return None
         k = plan.stage_index(t_s)
-        policy = self._policy(plan, build=False)
+        policy = self._policy(plan)
         if k is None or policy is None or not policy.has_law[k]:
             return None
         case, units = self.planner.case, self.planner.units
@@ -98,15 +98,14 @@ class FeedbackLaws:
         plan.fly_law(k, thrust)
         return Served(k, dr, dv, thrust, spent)
 
-    def _policy(self, plan: Plan, build: bool) -> Policy | None:
-        """The plan's laws (None: none, or not built yet and ``build`` is False)."""
-        key = id(plan.solution)
+    def _policy(self, plan: Plan) -> Policy | None:
+        """The plan's laws, built at the first call (None: it has none). The solution itself is
+        kept as the key: an id() would be reused by a later plan once this one is freed."""
+        sol = plan.solution
         with self._lock:
-            if self._built is not None and self._built[0] == key:
+            if self._built is not None and self._built[0] is sol:
                 return self._built[1]
-            if not build:
-                return None
-            self._built = (key, self._build(plan))
+            self._built = (sol, self._build(plan))
             return self._built[1]
 
     def _build(self, plan: Plan) -> Policy | None:

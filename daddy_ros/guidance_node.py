@@ -28,6 +28,7 @@ from .config import NodeConfig, PlannerConfig, TriggerConfig, bundled_plan
 from .diagnostics import DiagnosticsReporter
 from .plan import Code, Level, Plan
 from .planner import GuidancePlanner
+from .feedback import FeedbackLaws
 from .self_trigger import ReplanTrigger
 from .session import GuidanceSession
 from .spin import run_node
@@ -140,9 +141,11 @@ class GuidanceNode(LifecycleNode):
             return TransitionCallbackReturn.FAILURE
         cfg = config(NodeConfig)
         self.frame_id = cfg.frame_id
-        trigger = ReplanTrigger.for_planner(self.planner, config(TriggerConfig))
-        self.session = GuidanceSession(self.planner, trigger, cfg.plan_file or self._bundled_plan(),
-                                       cfg.persist_file, self, lambda: self._active)
+        policy = config(TriggerConfig)
+        self.session = GuidanceSession(self.planner, ReplanTrigger.for_planner(self.planner, policy),
+                                       cfg.plan_file or self._bundled_plan(), cfg.persist_file,
+                                       self, lambda: self._active,
+                                       FeedbackLaws.for_planner(self.planner, policy))
         estimates, owner = MutuallyExclusiveCallbackGroup(), self.service_node or self
         # requests in their own group: a request flood must not delay the estimates
         inputs = ((io.STATE, self._on_state, estimates), (io.MASS, self._on_mass, estimates),

@@ -58,6 +58,7 @@ class Code(str, Enum):
     PLAN_ADOPTED = "PLAN_ADOPTED"           # a nominal or given plan is now in force
     PLAN_FILE_ERROR = "PLAN_FILE_ERROR"     # plan_file / persist_file unreadable
     RESTORED = "RESTORED"                   # a persisted plan restored after a restart
+    FEEDBACK_LAW = "FEEDBACK_LAW"           # a stage's thrust from the plan's feedback law
     INTERNAL_ERROR = "INTERNAL_ERROR"       # a bug: reported, the node goes on
 
     __str__ = str.__str__
@@ -92,7 +93,6 @@ class Plan:
     max_violation: float = 0.0
     thrust_bound_n: float = 0.0
     thrust_rtn: bool = False
-    law_stages: set = field(default_factory=set)   # stages whose thrust a feedback law set
 
     @classmethod
     def of(cls, sol: Solution, X: np.ndarray, epoch_s: float, units: Units, thrust_bound: float,
@@ -146,7 +146,6 @@ class Plan:
     def fly_law(self, k: int, thrust_n: np.ndarray) -> None:
         """Stage k flies ``thrust_n`` [N], a feedback law's (``daddy_ros.feedback``)."""
         self.thrust_n[k] = thrust_n
-        self.law_stages.add(k)
 
     def command_at(self, t_s: float, pos_m, vel_m_s) -> np.ndarray:
         """The thrust command [N] at time t in the scenario's frame, for a spacecraft at

@@ -19,10 +19,11 @@ import numpy as np
 from daddy_core.errors import DaddyError
 
 from .checks import InputRejected
+from .feedback import FeedbackLaws
 from .plan import Code, Level, Plan
 from .planner import GuidancePlanner
 from .request_queue import RequestQueue
-from .self_trigger import ReplanTrigger
+from .self_trigger import Reason, ReplanTrigger
 
 if TYPE_CHECKING:   # (a plain dataclass of the estimate; its module also converts messages)
     from .conversions import OdometryState as StateEstimate
@@ -47,11 +48,14 @@ class GuidanceSession:
 
     plan_file: the nominal plan adopted at the first estimate ('' none); persist_file: where the
     plan in force is kept for crash recovery ('' none); active: whether thrust may be commanded
-    (a callable: the node's lifecycle state)."""
+    (a callable: the node's lifecycle state); laws: the feedback laws flown at stage boundaries
+    instead of re-plans (``feedback``), or None."""
 
     def __init__(self, planner: GuidancePlanner, trigger: ReplanTrigger | None, plan_file: str,
-                 persist_file: str, outputs: Outputs, active):
+                 persist_file: str, outputs: Outputs, active, laws: FeedbackLaws | None = None):
         self.planner, self.trigger, self.out, self.active = planner, trigger, outputs, active
+        self.laws = laws
+        self.laws_served = 0
         self.plan_file, self.persist_file = plan_file, persist_file
         self.queue = RequestQueue()
         self.replans = 0
@@ -97,16 +101,40 @@ class GuidanceSession:
 
     def _self_triggered(self, est: StateEstimate, stamp: float, plan: Plan) -> bool:
         """Ask the re-plan policy about an accepted estimate; when a re-plan is due, queue it
-        and withhold the estimate's thrust command until it has finished."""
+        and withhold the estimate's thrust command until it has finished -- unless it is a
+        stage boundary's and the plan's feedback law serves it (``_fly_law``)."""
         mass = self.queue.mass_for(stamp)
         if self.trigger is None or mass is None:
             return False
         reason = self.trigger.observe(stamp, est.pos_m, est.vel_m_s, mass, plan)
         if reason is None:
             return False
+        if reason is Reason.STAGE and self._fly_law(est, stamp, mass, plan):
+            return False
         with self._withheld_lock:
             self._withheld.append(stamp)
         self.queue.enqueue(f"self-{reason}-{stamp:.3f}", stamp)
+        return True
+
+    def _fly_law(self, est: StateEstimate, stamp: float, mass: float, plan: Plan) -> bool:
+        """The stage's thrust from the plan's feedback law where the estimate is inside the
+        laws' validity: the prediction restarts from the estimate, the schedule with the law's
+        thrust is published, an OK event with code FEEDBACK_LAW says so. False: re-plan."""
+        if self.laws is None:
+            return False
+        served = self.laws.serve(plan, stamp, est.pos_m, est.vel_m_s, mass)
+        if served is None:
+            return False
+        self.trigger.replanned(stamp, est.pos_m, est.vel_m_s, mass)
+        self.laws_served += 1
+        self.out.publish_plan(plan, None)
+        self.out.diag(Level.OK, Code.FEEDBACK_LAW,
+                      f"stage {served.stage}: thrust from the plan's feedback law",
+                      {"request_id": f"law-{stamp:.3f}", "stage": str(served.stage),
+                       "deviation_position_m": f"{served.position_m:.3f}",
+                       "deviation_velocity_m_s": f"{served.velocity_m_s:.6f}",
+                       "thrust_n": " ".join(f"{v:.9g}" for v in served.thrust_n),
+                       "evaluation_s": f"{served.evaluation_s:.6f}"}, stamp)
         return True
 
     def _maybe_replan_after_restart(self) -> None:
@@ -215,6 +243,8 @@ class GuidanceSession:
             if why:
                 out.level, out.reason = Level.WARN, f"{out.reason}; {why}"
         self._finish(request_id, out, out.level, out.code, out.reason, stamp, started)
+        if self.laws is not None and out.ok:   # the new plan's laws, off the estimates' path
+            self.laws.prepare(self.planner.plan)
 
     def _finish(self, request_id, out, level: Level, code: Code, reason: str, stamp,
                 extra=None) -> None:

@@ -248,6 +248,8 @@ class Summary:
     propellant_open_loop_kg: float
     latency_ms: Spread          # every re-plan of every completed run
     replans_per_run: float
+    laws_per_run: float         # stage boundaries served by feedback laws instead
+    law_eval_ms: Spread         # every served law's evaluation
     cpu_s_per_run: float
     errors: tuple               # (error text, count), most frequent first
 
@@ -270,6 +272,8 @@ def summarise(results: Results) -> Summary:
         propellant_open_loop_kg=results.header.propellant_open_loop_kg,
         latency_ms=Spread.of(x for r in done for x in r.latency_ms),
         replans_per_run=statistics.mean(r.replans for r in done) if done else math.nan,
+        laws_per_run=statistics.mean(r.laws_served for r in done) if done else math.nan,
+        law_eval_ms=Spread.of(x for r in done for x in r.law_eval_ms),
         cpu_s_per_run=statistics.mean(r.cpu_s for r in recs) if recs else math.nan,
         errors=tuple(sorted(errors.items(), key=lambda kv: -kv[1])))
 
@@ -296,6 +300,10 @@ def format_summary(s: Summary, header: Header) -> str:
                                             (sp.median, sp.p95, sp.max)))
     rows += ["", f"propellant of the open-loop optimum: {s.propellant_open_loop_kg:.3f} kg",
              f"re-plans per run: {s.replans_per_run:.1f}; CPU per run: {s.cpu_s_per_run:.1f} s"]
+    if s.laws_per_run:
+        rows.append(f"stage boundaries served by feedback laws per run: {s.laws_per_run:.1f} "
+                    f"(evaluation median {1e3 * s.law_eval_ms.median:.0f} us, max "
+                    f"{1e3 * s.law_eval_ms.max:.0f} us)")
     for text, n in s.errors:
         rows.append(f"failed x{n}: {text}")
     return "\n".join(rows)

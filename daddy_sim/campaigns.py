@@ -353,6 +353,8 @@ class RunRecord:
     replans: int = 0
     drift_replans: int = 0
     latency_ms: tuple = ()                 # every re-plan's wall time, in flight order
+    laws_served: int = 0                   # stage boundaries a feedback law served (no re-plan)
+    law_eval_ms: tuple = ()                # each served law's evaluation time
     wall_s: float = 0.0
     cpu_s: float = 0.0
     dispersion: Dispersion | None = None
@@ -364,7 +366,7 @@ class RunRecord:
         equal for the same config and seed on any executor."""
         return (self.seed, self.status, self.success, self.miss_km, self.miss_cm_s,
                 self.final_mass_kg, self.propellant_kg, self.replans, self.drift_replans,
-                self.dispersion, self.error)
+                self.laws_served, self.dispersion, self.error)
 
     @property
     def latency_ms_median(self) -> float:
@@ -382,6 +384,7 @@ class RunRecord:
         return (f"seed {self.seed}: miss {self.miss_km:.3f} km {self.miss_cm_s:.2f} cm/s, "
                 f"propellant {self.propellant_kg:.3f} kg, {self.replans} re-plans "
                 f"({self.drift_replans} on drift)"
+                + (f", {self.laws_served} by feedback laws" if self.laws_served else "")
                 + (f", outage {outage[1] / 3600:.1f} h" if outage else ""))
 
     def to_json(self) -> dict:
@@ -396,6 +399,8 @@ class RunRecord:
                  latency_ms_median=_or_none(self.latency_ms_median),
                  latency_ms_max=_or_none(self.latency_ms_max),
                  latency_ms=[round(x, 3) for x in self.latency_ms],
+                 laws_served=self.laws_served,
+                 law_eval_ms=[round(x, 5) for x in self.law_eval_ms],
                  wall_s=round(self.wall_s, 3), cpu_s=round(self.cpu_s, 3),
                  dispersion=self.dispersion.to_dict() if self.dispersion else None,
                  error=self.error, worker=self.worker)
@@ -410,6 +415,8 @@ class RunRecord:
                    propellant_kg=nan(d.get("propellant_kg")), replans=int(d.get("replans", 0)),
                    drift_replans=int(d.get("drift_replans", 0)),
                    latency_ms=tuple(float(x) for x in d.get("latency_ms", ())),
+                   laws_served=int(d.get("laws_served", 0)),
+                   law_eval_ms=tuple(float(x) for x in d.get("law_eval_ms", ())),
                    wall_s=float(d.get("wall_s", 0.0)), cpu_s=float(d.get("cpu_s", 0.0)),
                    dispersion=(Dispersion.from_dict(d["dispersion"])
                                if d.get("dispersion") else None),
@@ -442,7 +449,8 @@ def flight_record(config: CampaignConfig, seed: int, flight: dict,
         miss_km=flight["miss_km"], miss_cm_s=flight["miss_cm_s"],
         final_mass_kg=flight["final_mass_kg"], propellant_kg=propellant,
         replans=flight["replans"], drift_replans=flight["triggered"],
-        latency_ms=tuple(flight["latency_ms"]), dispersion=dispersion, **kw)
+        latency_ms=tuple(flight["latency_ms"]), laws_served=flight["laws_served"],
+        law_eval_ms=tuple(flight["law_eval_ms"]), dispersion=dispersion, **kw)
 
 
 def run_one(config: CampaignConfig, seed: int) -> RunRecord:

@@ -40,7 +40,6 @@ class DirectLink:
             return None
         self.trigger.replanned(t_s, pos, vel, mass)
         if reason is Reason.STAGE and self.laws is not None:
-            self.laws.prepare(plan)   # (the node's worker builds them after each new plan)
             served = self.laws.serve(plan, t_s, pos, vel, mass)
             if served is not None:
                 self.served.append(served)

@@ -196,8 +196,14 @@ def column_weights(problem: Problem, U: np.ndarray, floor: float) -> np.ndarray 
         return None
     N, nu, w = problem.N, problem.nu, problem.nx + problem.nu
     s = np.ones((N, w))
-    s[:, :nu] = np.clip(np.linalg.norm(U, axis=1) / problem.u_max, floor, 1.0)[:, None]
+    s[:, :nu] = control_scale(U, problem.u_max, floor)[:, None]
     return s.ravel()
+
+
+def control_scale(U: np.ndarray, u_max: float, floor: float) -> np.ndarray:
+    """(N,) max(|u_k| / u_max, floor), at most 1: how far a minimum-norm correction may move
+    stage k's control (U (N, nu)); a coasting stage's little, so coasting arcs keep coasting."""
+    return np.clip(np.linalg.norm(U, axis=1) / u_max, floor, 1.0)
 
 
 class BandedSigma:
