@@ -101,7 +101,7 @@ class TriggerConfig:
     arrival_min_step: float = option(1 / 256, "... until less than this fraction of a nominal "
                                               "stage remains (the last open-loop interval)",
                                      bounds=(0.0, 1.0))
-    feedback_order: int = option(0, "at a stage-boundary re-plan, fly the plan's feedback law "
+    feedback_order: int = option(1, "at a stage-boundary re-plan, fly the plan's feedback law "
                                     "of this order instead where the estimate is near the plan "
                                     "(feedback_position_m, feedback_velocity_m_s; 0: always "
                                     "re-plan; docs/policies.md)", bounds=(0, 1))

@@ -353,6 +353,7 @@ class RunRecord:
     replans: int = 0
     drift_replans: int = 0
     latency_ms: tuple = ()                 # every re-plan's wall time, in flight order
+    deviation_si: tuple = ()               # the terminal position [m] and velocity [m/s] off target
     laws_served: int = 0                   # stage boundaries a feedback law served (no re-plan)
     law_eval_ms: tuple = ()                # each served law's evaluation time
     wall_s: float = 0.0
@@ -399,6 +400,7 @@ class RunRecord:
                  latency_ms_median=_or_none(self.latency_ms_median),
                  latency_ms_max=_or_none(self.latency_ms_max),
                  latency_ms=[round(x, 3) for x in self.latency_ms],
+                 deviation_si=[float(x) for x in self.deviation_si],
                  laws_served=self.laws_served,
                  law_eval_ms=[round(x, 5) for x in self.law_eval_ms],
                  wall_s=round(self.wall_s, 3), cpu_s=round(self.cpu_s, 3),
@@ -415,6 +417,7 @@ class RunRecord:
                    propellant_kg=nan(d.get("propellant_kg")), replans=int(d.get("replans", 0)),
                    drift_replans=int(d.get("drift_replans", 0)),
                    latency_ms=tuple(float(x) for x in d.get("latency_ms", ())),
+                   deviation_si=tuple(float(x) for x in d.get("deviation_si") or ()),
                    laws_served=int(d.get("laws_served", 0)),
                    law_eval_ms=tuple(float(x) for x in d.get("law_eval_ms", ())),
                    wall_s=float(d.get("wall_s", 0.0)), cpu_s=float(d.get("cpu_s", 0.0)),
@@ -450,6 +453,7 @@ def flight_record(config: CampaignConfig, seed: int, flight: dict,
         final_mass_kg=flight["final_mass_kg"], propellant_kg=propellant,
         replans=flight["replans"], drift_replans=flight["triggered"],
         latency_ms=tuple(flight["latency_ms"]), laws_served=flight["laws_served"],
+        deviation_si=tuple(float(x) for x in flight["deviation_si"]),
         law_eval_ms=tuple(flight["law_eval_ms"]), dispersion=dispersion, **kw)
 
 

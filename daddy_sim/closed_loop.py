@@ -120,6 +120,7 @@ def fly(link, sim: TruthSim, planner: GuidancePlanner, policy: TriggerConfig, su
     miss_r, miss_v = sim.miss()
     m_final = sim.truth_si()[2]
     return {"miss_km": miss_r / 1e3, "miss_cm_s": miss_v * 100, "final_mass_kg": m_final,
+            "deviation_si": sim.deviation_si(),
             "replans": len(latencies), "triggered": triggered,
             "laws_served": len(getattr(link, "served", ())),
             "law_eval_ms": [1e3 * s.evaluation_s for s in getattr(link, "served", ())],

@@ -49,6 +49,7 @@ class RosLink:
         self.client = GuidanceClient(frame_id, name="daddy_gnc_sim")
         self.node = self.client.node
         self.timeout_s = timeout_s
+        self.served: list = []   # stage boundaries the node served by a feedback law
 
     def publish_estimate(self, pos, vel, mass, t_s):
         self.client.publish_estimate(pos, vel, mass, t_s)
@@ -67,13 +68,23 @@ class RosLink:
         only once guidance has answered. (reason, level, latency s) of that re-plan, or None.
         ``rid`` is unused: the node names its own re-plans."""
         c = self.client
-        n_diags = len(c.diags)
+        n_diags, n_schedules = len(c.diags), len(c.schedules)
         t0 = time.perf_counter()
         self.publish_estimate(pos, vel, mass, t_s)
         if not c.wait_for(lambda: self._thrust_for(t_s), self.timeout_s):
             return (None, f"ERROR no thrust command for the estimate at {t_s:.3f} s",
                     time.perf_counter() - t0)
         lat = time.perf_counter() - t0
+        # a law's command is not withheld; at a stage boundary its event (on its own topic)
+        # may still be on its way
+        if np.any(np.abs(self.stage_starts() - t_s) < 1e-3):
+            c.wait_for(lambda: self._law(t_s, n_diags) or self._self_replan(t_s, n_diags),
+                       SELF_REPLAN_HINT_S * 10)
+        law = self._law(t_s, n_diags)
+        if law is not None:   # the stage flies the law: its re-published schedule holds it
+            self.served.append(law)
+            c.wait_for(lambda: len(c.schedules) > n_schedules, self.timeout_s)
+            return None
         # a withheld command took a solve (>= tens of ms); the re-plan's diagnostic was
         # published before it: allow it a moment to arrive on its own topic
         wait = 0.5 if lat > SELF_REPLAN_HINT_S else 0.0
@@ -108,6 +119,20 @@ class RosLink:
         with self.client.cond:
             recent = [m for _, m in self.client.thrust[-5:]]
         return any(abs(self._stamp_s(m.header.stamp) - t_s) < 1e-6 for m in recent)
+
+    def _law(self, t_s, after: int):
+        """The ``FEEDBACK_LAW`` event of the estimate at t_s (a ``feedback.Served``-like record
+        with its ``evaluation_s``), among the diagnostics from index ``after`` on, or None."""
+        from types import SimpleNamespace
+
+        from daddy_ros.client import status_of
+        for _, m in self.client.diags[after:]:
+            for st in m.status:
+                vals = status_of(st)[2]
+                if vals.get("code") == "FEEDBACK_LAW" and \
+                        vals.get("request_id") == f"law-{t_s:.3f}":
+                    return SimpleNamespace(evaluation_s=float(vals["evaluation_s"]))
+        return None
 
     def _self_replan(self, t_s, after: int):
         """(request id, (level, message, values)) of a self-triggered re-plan that started from

@@ -105,5 +105,12 @@ class TruthSim:
         if self.case.staged_in_angle:
             raise DaddyError(f"TruthSim.miss: {self.case.name!r} arrives on an orbit, not at a "
                              "state; compare its elements (models.cartesian_to_mee)")
-        d = self.units.cartesian_si(self.x - self.case.x_target)
+        d = self.deviation_si()
         return float(np.linalg.norm(d[:3])), float(np.linalg.norm(d[3:6]))
+
+    def deviation_si(self) -> np.ndarray:
+        """(6,) the truth's position [m] and velocity [m/s] minus the case target's (``miss``)."""
+        if self.case.staged_in_angle:
+            raise DaddyError(f"TruthSim.deviation_si: {self.case.name!r} arrives on an orbit, "
+                             "not at a state")
+        return self.units.cartesian_si(self.x - self.case.x_target)[:6]

@@ -69,7 +69,7 @@ def test_an_estimate_outside_the_validity_or_past_the_laws_is_re_planned():
     t_last = float(plan.start_times_s[last])
     assert laws.serve(plan, t_last, plan.states_si[last, :3], plan.states_si[last, 3:6],
                       float(plan.states_si[last, 6])) is None
-    assert FeedbackLaws.for_planner(planner, TriggerConfig()) is None   # feedback_order 0
+    assert FeedbackLaws.for_planner(planner, TriggerConfig(feedback_order=0)) is None
 
 
 class _Outputs:
