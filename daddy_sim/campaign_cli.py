@@ -6,6 +6,7 @@
     daddy_campaign summary F.jsonl [--json]
     daddy_campaign merge A.jsonl B.jsonl -o C.jsonl
     daddy_campaign plot F.jsonl [-o F.png]
+    daddy_campaign predict F.jsonl|CAMPAIGN.yaml [--samples N] [--plot P.png]
 
 A campaign file holds the sections of ``campaigns.CampaignConfig`` (any omitted field takes its
 default; the defaults are ``make monte-carlo``'s). Every finished run is appended to the results
@@ -160,6 +161,41 @@ def _cmd_plot(args) -> int:
     return _plot(results, args.output or str(Path(args.file).with_suffix(".png")))
 
 
+def _cmd_predict(args) -> int:
+    """The terminal dispersion predicted on the linearised closed loop; beside the runs of a
+    results file (its experiment's config), or of a campaign file alone."""
+    import numpy as np
+
+    from .campaign_prediction import AXES, compare, format_comparison, plot_comparison, predict
+    source = Path(args.source)
+    if source.suffix == ".jsonl":
+        results = read_results(source)
+        config = results.header.config
+        runs = np.array([r.deviation_si for r in results.records if len(r.deviation_si) == 6])
+        cpu = sum(r.cpu_s for r in results.records)
+    else:
+        config, runs, cpu = load_config(source), np.zeros((0, 6)), 0.0
+    prediction = predict(config, samples=args.samples, seed=args.seed)
+    if len(runs) >= 2:
+        print(format_comparison(compare(prediction, runs, cpu)))
+    else:
+        std = np.sqrt(np.diag(prediction.cov_si))
+        print(f"terminal deviation predicted for {config.case} (linearised closed loop, "
+              f"{args.samples} samples, {prediction.cpu_s:.1f} s CPU):")
+        for axis, m, sd in zip(AXES, prediction.mean_si, std):
+            print(f"  {axis:10s} mean {m:12.6g}  std {sd:12.6g}")
+        if len(runs):
+            print(f"({len(runs)} run with a terminal deviation in {source}: too few to compare)")
+    if args.plot:
+        try:
+            plot_comparison(prediction, runs, args.plot)
+        except ImportError:
+            print("plot skipped: matplotlib not installed (pip install 'daddy_ros[plots]')")
+            return 1
+        print(f"plot: {args.plot}")
+    return 0
+
+
 def _plot(results: Results, path: str) -> int:
     from .campaign_plot import plot_campaign
     try:
@@ -204,6 +240,15 @@ def build_parser() -> argparse.ArgumentParser:
     pl.add_argument("file")
     pl.add_argument("-o", "--output", help="PNG (default: the results file's name .png)")
     pl.set_defaults(func=_cmd_plot)
+    pr = sub.add_parser("predict", help="the terminal dispersion predicted on the linearised "
+                                        "closed loop, beside a results file's runs")
+    pr.add_argument("source", help="a results file (.jsonl: compared with its runs) or a "
+                                   "campaign file")
+    pr.add_argument("--samples", type=int, default=20_000,
+                    help="draws of the linearised loop (default 20000)")
+    pr.add_argument("--seed", type=int, default=0)
+    pr.add_argument("--plot", metavar="PNG", help="the runs and both covariances' ellipses")
+    pr.set_defaults(func=_cmd_predict)
     return ap
 
 

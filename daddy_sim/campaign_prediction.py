@@ -1,0 +1,337 @@
+"""A campaign's terminal dispersion predicted from the closed loop's first-order maps (issue 47),
+beside the campaign's Monte Carlo: the guidance node's loop linearised about the nominal plan
+(the DA engine giving every flow's map), sampled as matrix products instead of flights.
+
+The model flies the campaign's own estimate grid (``closed_loop.flight_steps``) with its
+errors (``campaigns.CampaignConfig``): the initial-state dispersion, a navigation error nu on
+every estimate the loop corrects from, an execution error w on every flown piece (magnitude and
+pointing, as ``sim.TruthSim.apply`` draws them). The state deviation e (7: r, v, m) from the
+nominal and the thrust correction c (3) in force evolve as
+
+    piece [a, b] of stage k:  e <- Phi_x e + Phi_u (c + w),  w ~ N(0, Q(U_k))
+    stage boundary k (laws):  c <- K_k (e + nu)              (the node's tracking law, order 1)
+    arrival estimate:         c <- the re-plan's first re-gridded stage (below)
+
+A re-plan of the arrival phase (``daddy_ros.shift``) targets the velocity exactly and the
+position within ``arrival_tolerance_m``. To first order it is the least correction, over the
+remaining time re-gridded into ``shift.MIN_STAGES_LEFT`` stages and weighted like the laws'
+(``policy.correction_scale``), that nulls the terminal velocity predicted from the estimate e +
+nu; where that leaves the predicted position outside the tolerance, the position is brought to
+the tolerance's sphere as well (the radial projection). That projection is why the terminal
+dispersion is not a Gaussian of the errors and is sampled (``samples`` draws of every error),
+not propagated as a covariance. Drift re-plans are not modelled: to first order a re-plan and
+the next law null the same predicted error. A stage without a law re-plans like an arrival
+estimate.
+"""
+from __future__ import annotations
+
+import time
+from dataclasses import dataclass
+
+import numpy as np
+
+from daddy_core.da.core import variables
+from daddy_core.integrators import rk78
+from daddy_core.policy import correction_scale, tracking_policy
+
+from daddy_ros.shift import MIN_STAGES_LEFT
+from .campaigns import CampaignConfig
+from .closed_loop import flight_steps, nominal_planner
+from .sim import T0_S
+
+NX, NU = 7, 3
+
+
+@dataclass(frozen=True)
+class Prediction:
+    """The terminal deviation from the target, position [m] and velocity [m/s], as ``samples``
+    draws of the linearised closed loop (samples, 6); its mean (6,) and covariance (6, 6); the
+    CPU the prediction took [s]."""
+
+    deviations_si: np.ndarray
+    cpu_s: float
+
+    @property
+    def mean_si(self) -> np.ndarray:
+        return self.deviations_si.mean(axis=0)
+
+    @property
+    def cov_si(self) -> np.ndarray:
+        return np.cov(self.deviations_si, rowvar=False)
+
+
+class _Flight:
+    """The nominal plan's flow on the mission clock (s from T0): states, thrust and first-order
+    maps of any interval, in normalised units."""
+
+    def __init__(self, planner):
+        plan = planner.plan
+        self.case, self.units = planner.case, planner.units
+        self.sol = plan.solution
+        self.starts = plan.start_times_s - T0_S
+        self.end = float(plan.end_s - T0_S)
+        self.rhs = self.case.cartesian_rhs()
+        self.problem = planner.base_problem.with_x0(self.sol.X[0], self.sol.stage_dt,
+                                                    self.sol.t_start)
+
+    def stage(self, t: float) -> int:
+        return int(np.clip(np.searchsorted(self.starts, t + 1e-6, side="right") - 1, 0,
+                           len(self.starts) - 1))
+
+    def maps(self, a: float, b: float) -> tuple[np.ndarray, np.ndarray]:
+        """(Phi_x (7, 7), Phi_u (7, 3)) of the nominal flow over [a, b] inside one stage."""
+        k = self.stage(a)
+        x0 = self.state(a)
+        x = variables(x0, order=1, n=NX + NU)
+        u = variables(self.sol.U[k], order=1, n=NX + NU, first=NX)
+        dt = float(self.units.time(b - a))
+        J = rk78(self.rhs, x, u, 0.0, dt, tol=1e-12).linear()
+        return J[:, :NX], J[:, NX:]
+
+    def state(self, t: float) -> np.ndarray:
+        """The nominal state at t (normalised)."""
+        k = self.stage(t)
+        dt = float(self.units.time(t - self.starts[k]))
+        x = self.sol.X[k]
+        return x if dt <= 0 else rk78(self.rhs, x, self.sol.U[k], 0.0, dt, tol=1e-12)
+
+    def pieces(self, a: float, b: float, also=()) -> list[tuple[float, float]]:
+        """[a, b] cut at the nominal stage starts (and the times ``also``)."""
+        inner = np.union1d(self.starts, np.asarray(also, float))
+        cuts = [a, *inner[(inner > a + 1e-6) & (inner < b - 1e-6)], b]
+        return list(zip(cuts[:-1], cuts[1:]))
+
+
+def predict(config: CampaignConfig, samples: int = 20_000, seed: int = 0,
+            initial_si: np.ndarray | None = None) -> Prediction:
+    """The campaign's terminal deviation, sampled on its linearised closed loop (module
+    docstring). ``initial_si``: (samples, 6) initial-state deviations [m, m/s] to fly instead
+    of draws from the campaign's ``initial_state`` dispersion."""
+    cpu = time.process_time()
+    g = config.guidance
+    planner, _ = nominal_planner(config.case, g.time_budget_s, g.arrival_tolerance_m)
+    flight = _Flight(planner)
+    units, sol = flight.units, flight.sol
+    N = len(sol.U)
+    laws = tracking_policy(flight.problem, sol.X, sol.U, 1) if g.feedback_order else None
+    scale = _si_scale(units)
+    rng = np.random.default_rng(seed)
+    nav = np.r_[[config.navigation.position_m] * 3, [config.navigation.velocity_m_s] * 3,
+                0.0] / scale
+    ini = np.r_[[config.initial_state.position_m] * 3, [config.initial_state.velocity_m_s] * 3,
+                0.0] / scale
+    e = rng.normal(size=(samples, NX)) * ini                       # (S, 7) truth - nominal
+    if initial_si is not None:
+        initial_si = np.asarray(initial_si, float)
+        e = np.zeros((len(initial_si), NX))
+        e[:, :6] = initial_si / scale[:6]
+        samples = len(e)
+    # the corrections in force: stage ends on the clock (J + 1,) and each stage's (S, J, 3)
+    ends, c = np.array([0.0, flight.end]), np.zeros((samples, 1, NU))
+    radius = float(units.length(g.arrival_tolerance_m)) if g.arrival_tolerance_m else 0.0
+    dt_stage = flight.end / N
+    last_law = N - max(g.arrival_stages, 0) - 1
+    for t0, t1 in flight_steps(0.0, N, dt_stage, config.simulation.substeps, g.arrival_stages,
+                               config.simulation.final_substeps or config.simulation.substeps,
+                               g.arrival_min_step):
+        action = _correction(flight, laws, g, t0, dt_stage, last_law)
+        if action is not None:
+            seen = e + rng.normal(size=(samples, NX)) * nav         # the estimate's deviation
+            ends, c = action(seen, radius)
+        for a, b in flight.pieces(t0, t1, ends):
+            Fx, Fu = flight.maps(a, b)
+            j = np.searchsorted(ends, a + 1e-6, side="right") - 1
+            now = c[:, j] if 0 <= j < c.shape[1] else 0.0
+            w = rng.normal(size=(samples, NU)) @ _execution(sol.U[flight.stage(a)], config).T
+            e = e @ Fx.T + (now + w) @ Fu.T
+    return Prediction(e[:, :6] * scale[:6], time.process_time() - cpu)
+
+
+def _correction(flight: _Flight, laws, g, t: float, dt_stage: float, last_law: int):
+    """The correction made from the estimate at t, as a function (seen deviations (S, 7),
+    tolerance radius) -> c (S, 3), or None: a law at a stage boundary before the arrival phase,
+    the re-plan's targeting in it."""
+    if not g.self_replan:
+        return None                             # the nominal flown open loop
+    remaining = (flight.end - t) / dt_stage                        # in nominal stages
+    eps = 1e-6
+    if g.arrival_stages and remaining <= g.arrival_stages + eps and \
+            remaining > g.arrival_min_step + eps:
+        return _Targeting(flight, t)
+    k = int(round(t / dt_stage))
+    if laws is None or abs(t - k * dt_stage) > 1e-6 * dt_stage or not 0 < k <= last_law \
+            or (g.replan_every_stages and k % g.replan_every_stages):
+        return None
+    if not laws.has_law[k]:
+        return _Targeting(flight, t)            # no law: a re-plan
+    K = laws.coefficients[k, 1:, :]             # (7, 3): c = seen @ K, for stage k
+    span = np.array([t, t + dt_stage])
+    return lambda seen, radius: (span, (seen @ K)[:, None, :])
+
+
+class _Targeting:
+    """A re-plan's first-order correction from t (module docstring): the thrust change of each
+    re-gridded stage for a seen deviation."""
+
+    def __init__(self, flight: _Flight, t: float):
+        self.edges = edges = np.linspace(t, flight.end, MIN_STAGES_LEFT + 1)
+        blocks = [flight.pieces(a, b) for a, b in zip(edges[:-1], edges[1:])]
+        to_end = np.eye(NX)                            # Phi from the end of a piece to t_f
+        sens = []                                      # each re-gridded stage's d x_f / d c
+        for stage in reversed(blocks):
+            M = np.zeros((NX, NU))
+            for a, b in reversed(stage):
+                Fx, Fu = flight.maps(a, b)
+                M += to_end @ Fu
+                to_end = to_end @ Fx
+            sens.append(M)
+        U = flight.sol.U[[flight.stage(a) for a in edges[:-1]]]        # (stages, 3)
+        self.scale = np.repeat(correction_scale(flight.problem, U), NU)  # of each column
+        M = np.hstack(sens[::-1]) * self.scale         # (7, 3 * stages), scaled controls
+        self.phi, self.M = to_end[:6], M[:6]
+        self.thrust = U.ravel()
+        self.rating = float(flight.units.thrust(flight.case.spacecraft.max_thrust_n))
+
+    def __call__(self, seen: np.ndarray, radius: float):
+        predicted = seen @ self.phi.T                  # (S, 6) the terminal deviation, uncorrected
+        c = -predicted[:, 3:6] @ np.linalg.pinv(self.M[3:6]).T     # the velocity rows only
+        if radius:
+            pos = predicted[:, :3] + c @ self.M[:3].T
+            r = np.linalg.norm(pos, axis=1)
+            out = np.flatnonzero(r > radius)
+            if out.size:                               # onto the tolerance's sphere as well
+                goal = np.zeros((out.size, 6))
+                goal[:, :3] = pos[out] * (radius / r[out])[:, None]
+                both = (goal - predicted[out]) @ np.linalg.pinv(self.M).T
+                # within the rating only: else the plan keeps the velocity's (best effort)
+                fits = np.all(self._norms(both) <= self.rating, axis=1)
+                c[out[fits]] = both[fits]
+        return self.edges, self._clipped(c)
+
+    def _norms(self, c: np.ndarray) -> np.ndarray:
+        """(S, stages) the thrust of each re-gridded stage with the scaled corrections c."""
+        u = (self.thrust + c * self.scale).reshape(len(c), -1, NU)
+        return np.linalg.norm(u, axis=2)
+
+    def _clipped(self, c: np.ndarray) -> np.ndarray:
+        """(S, stages, 3) the thrust changes, a thrust past the rating scaled back onto it."""
+        u = (self.thrust + c * self.scale).reshape(len(c), -1, NU)
+        norm = np.linalg.norm(u, axis=2, keepdims=True)
+        u = np.where(norm > self.rating, u * self.rating / np.maximum(norm, 1e-300), u)
+        return u - self.thrust.reshape(-1, NU)
+
+
+def _execution(U: np.ndarray, config: CampaignConfig) -> np.ndarray:
+    """Covariance (3, 3) of the execution error on a commanded thrust U (normalised): the
+    magnitude's along U, the pointing's across it (a rotation by N(0, sigma) about a random
+    axis normal to U: sigma^2 / 2 per transverse axis)."""
+    mag = float(np.linalg.norm(U))
+    if mag == 0.0:
+        return np.zeros((NU, NU))
+    u = U / mag
+    across = np.eye(NU) - np.outer(u, u)
+    sp = np.radians(config.execution.pointing_deg)
+    return (config.execution.magnitude * mag) ** 2 * np.outer(u, u) + \
+        0.5 * (sp * mag) ** 2 * across
+
+
+def _si_scale(units) -> np.ndarray:
+    """(7,) SI per normalised unit of [r, v, m]."""
+    one = units.cartesian_si(np.ones(NX)) - units.cartesian_si(np.zeros(NX))
+    return np.asarray(one, float)
+
+
+AXES = ("x [m]", "y [m]", "z [m]", "vx [m/s]", "vy [m/s]", "vz [m/s]")
+
+
+@dataclass(frozen=True)
+class Comparison:
+    """A prediction beside a Monte Carlo's terminal deviations (runs, 6): per axis the
+    predicted mean and standard deviation, the sample's, and the sample's 95 % intervals
+    (the mean's Student t, the standard deviation's chi-square); the CPU of each [s]."""
+
+    predicted_mean: np.ndarray
+    predicted_std: np.ndarray
+    mean: np.ndarray
+    mean_95: np.ndarray          # (6, 2)
+    std: np.ndarray
+    std_95: np.ndarray           # (6, 2)
+    runs: int
+    predicted_cpu_s: float
+    monte_carlo_cpu_s: float
+
+    @property
+    def mean_inside(self) -> np.ndarray:
+        return (self.mean_95[:, 0] <= self.predicted_mean) & \
+            (self.predicted_mean <= self.mean_95[:, 1])
+
+    @property
+    def std_inside(self) -> np.ndarray:
+        return (self.std_95[:, 0] <= self.predicted_std) & \
+            (self.predicted_std <= self.std_95[:, 1])
+
+
+def compare(prediction: Prediction, deviations_si: np.ndarray,
+            monte_carlo_cpu_s: float) -> Comparison:
+    """``prediction`` against the Monte Carlo's terminal deviations (runs, 6)."""
+    from scipy import stats
+    d = np.asarray(deviations_si, float)
+    n = len(d)
+    mean, std = d.mean(axis=0), d.std(axis=0, ddof=1)
+    half = stats.t.ppf(0.975, n - 1) * std / np.sqrt(n)
+    lo, hi = stats.chi2.ppf([0.975, 0.025], n - 1)
+    return Comparison(prediction.mean_si, np.sqrt(np.diag(prediction.cov_si)), mean,
+                      np.column_stack([mean - half, mean + half]), std,
+                      np.column_stack([std * np.sqrt((n - 1) / lo), std * np.sqrt((n - 1) / hi)]),
+                      n, prediction.cpu_s, monte_carlo_cpu_s)
+
+
+def format_comparison(c: Comparison) -> str:
+    rows = [f"terminal deviation from the target: predicted (linearised closed loop) vs "
+            f"{c.runs} closed-loop runs (95 % intervals)",
+            f"{'':10s}{'mean pred':>12s}{'mean MC':>12s}{'95 % interval':>26s}"
+            f"{'std pred':>12s}{'std MC':>12s}{'95 % interval':>26s}"]
+    for i, axis in enumerate(AXES):
+        f = ".3f" if i < 3 else ".6f"
+        rows.append(
+            f"{axis:10s}{c.predicted_mean[i]:>12{f}}{c.mean[i]:>12{f}}"
+            f"{f'[{c.mean_95[i, 0]:{f}}, {c.mean_95[i, 1]:{f}}]':>26s}"
+            f"{c.predicted_std[i]:>12{f}}{c.std[i]:>12{f}}"
+            f"{f'[{c.std_95[i, 0]:{f}}, {c.std_95[i, 1]:{f}}]':>26s}"
+            f"  {'in' if c.mean_inside[i] else 'OUT'}/{'in' if c.std_inside[i] else 'OUT'}")
+    rows.append(f"CPU: prediction {c.predicted_cpu_s:.1f} s, Monte Carlo {c.monte_carlo_cpu_s:.0f} s"
+                f" ({c.predicted_cpu_s / c.monte_carlo_cpu_s:.2%})")
+    return "\n".join(rows)
+
+
+def plot_comparison(prediction: Prediction, deviations_si: np.ndarray, path) -> None:
+    """The terminal position (x-y, x-z) and velocity deviations of the runs with the 1- and
+    3-sigma ellipses of their covariance and of the prediction's. Needs matplotlib."""
+    import matplotlib
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+    d = np.asarray(deviations_si, float)
+    fig, axes = plt.subplots(1, 4, figsize=(18, 4.6))
+    for ax, (i, j) in zip(axes, ((0, 1), (0, 2), (3, 4), (3, 5))):
+        ax.plot(d[:, i], d[:, j], ".", ms=3, color="0.5", label=f"runs ({len(d)})")
+        for cov, colour, name in ((np.cov(d, rowvar=False), "tab:blue", "runs' covariance"),
+                                  (prediction.cov_si, "tab:orange", "predicted")):
+            for k, style in ((1, "-"), (3, "--")):
+                x, y = _ellipse(cov[np.ix_([i, j], [i, j])], k)
+                ax.plot(x, y, style, color=colour,
+                        label=f"{name}, {k} sigma")
+        ax.set_xlabel(AXES[i])
+        ax.set_ylabel(AXES[j])
+        ax.set_aspect("equal", adjustable="datalim")
+    axes[0].legend(fontsize=7, loc="upper left")
+    fig.suptitle("terminal deviation: closed-loop runs and the linearised loop's prediction")
+    fig.tight_layout()
+    fig.savefig(path, dpi=110)
+    plt.close(fig)
+
+
+def _ellipse(cov: np.ndarray, k: float, n: int = 200) -> tuple[np.ndarray, np.ndarray]:
+    w, v = np.linalg.eigh(cov)
+    a = np.linspace(0, 2 * np.pi, n)
+    pts = v @ (k * np.sqrt(np.maximum(w, 0.0))[:, None] * np.vstack([np.cos(a), np.sin(a)]))
+    return pts[0], pts[1]
