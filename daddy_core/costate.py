@@ -1,0 +1,145 @@
+"""Costate-controlled stages (issue 48, Pontryagin-Bellman DDP, Sidhoum & Oguri): a stage's
+decision variables are the costates lambda at its start; inside it the state and costate are
+integrated together and the thrust follows the minimum principle, so one stage spans hours to
+days of changing thrust.
+
+Fuel-optimal control of x = [r, v, m] with the cost J = int T / c dt (propellant, c = g0 Isp
+normalised) and the Hamiltonian H = lambda^T f(x, T u_hat) + T / c. The standard primer-vector
+law (Lawden; the paper's equations were lost in its text conversion, so this follows the
+textbook form, e.g. Taheri & Junkins):
+
+    u_hat = -lambda_v / |lambda_v|                       (the primer vector p = -lambda_v)
+    S     = |lambda_v| c / m + lambda_m - 1              (switching function: S > 0 burns)
+    T     = T_max (1 + tanh(S / rho)) / 2                (smoothed throttle, rho -> 0: bang-bang)
+    lambda' = -dH/dx
+
+The tanh throttle is the minimiser of H plus an entropy term in the throttle that does not
+depend on x, so the costate equations are H's partial derivatives with the law held (the
+envelope theorem). |lambda_v| is regularised as sqrt(|lambda_v|^2 + PRIMER_FLOOR^2), as the
+models regularise the thrust norm.
+
+``cr3bp_costate``: the Earth-Moon CR3BP with mass (``models.cr3bp``), its costate equations
+written out (the gravity's Hessian and the Coriolis term) on scalar components, for floats and
+DA alike; ``test/test_costate.py`` checks them against -dH/dx from the DA engine. Other models
+need their own (the generic route, H differentiated by the DA engine inside a DA integration,
+nests algebras: not built).
+"""
+from __future__ import annotations
+
+from .da import functions as dm
+from .dynamics.rhs import Dynamics
+
+PRIMER_FLOOR = 1e-12
+
+
+def cr3bp_costate(mu: float, exhaust_speed: float, u_max: float, rho: float) -> Dynamics:
+    """The state-costate right-hand side z' = F(z) of the CR3BP with mass, z = [r (3), v (3),
+    m, lambda_r (3), lambda_v (3), lambda_m] (14, *batch), normalised units, throttle sharpness
+    ``rho`` (module docstring); the control argument is unused (the costates are the
+    decisions)."""
+    gm1, gm2 = 1.0 - mu, mu
+    c = exhaust_speed
+
+    def rhs(t, z, _u):
+        px, py, pz, vx, vy, vz, m = z[0], z[1], z[2], z[3], z[4], z[5], z[6]
+        lrx, lry, lrz, lvx, lvy, lvz, lm = z[7], z[8], z[9], z[10], z[11], z[12], z[13]
+        d1, d2 = px + mu, px + (mu - 1.0)
+        yz2 = py * py + pz * pz
+        r1s, r2s = d1 * d1 + yz2, d2 * d2 + yz2
+        k1 = r1s ** -1.5 * gm1                        # (1 - mu) / r1^3
+        k2 = r2s ** -1.5 * gm2                        # mu / r2^3
+        q1, q2 = k1 * 3.0 / r1s, k2 * 3.0 / r2s       # 3 (1 - mu) / r1^5, 3 mu / r2^5
+        ksum = k1 + k2
+        inv_m = 1.0 / m
+        lv = dm.sqrt(lvx * lvx + lvy * lvy + lvz * lvz + PRIMER_FLOOR ** 2)
+        switch = lv * c * inv_m + lm - 1.0
+        thrust = (dm.tanh(switch * (1.0 / rho)) + 1.0) * (0.5 * u_max)
+        a = thrust * inv_m / lv                       # thrust acceleration per unit primer
+        ax = vy * 2.0 + px - d1 * k1 - d2 * k2 - lvx * a
+        ay = vx * -2.0 + py - py * ksum - lvy * a
+        az = -pz * ksum - lvz * a
+        # the gravity's Hessian (symmetric): d(a_grav)/dr
+        gxx = 1.0 - ksum + q1 * d1 * d1 + q2 * d2 * d2
+        gyy = 1.0 - ksum + (q1 + q2) * py * py
+        gzz = -ksum + (q1 + q2) * pz * pz
+        gxy = (q1 * d1 + q2 * d2) * py
+        gxz = (q1 * d1 + q2 * d2) * pz
+        gyz = (q1 + q2) * py * pz
+        return dm.vector([
+            vx, vy, vz, ax, ay, az, thrust * (-1.0 / c),
+            -(gxx * lvx + gxy * lvy + gxz * lvz),
+            -(gxy * lvx + gyy * lvy + gyz * lvz),
+            -(gxz * lvx + gyz * lvy + gzz * lvz),
+            -lrx + lvy * 2.0, -lry - lvx * 2.0, -lrz,
+            -thrust * lv * inv_m * inv_m])
+    return Dynamics(rhs, scalar_components=True)
+
+
+def cr3bp_hamiltonian(mu: float, exhaust_speed: float, u_max: float, rho: float):
+    """H(z) = lambda^T f(x, T u_hat) + T / c with the smoothed law held at z's costates: the
+    function whose partial derivatives ``cr3bp_costate``'s costate rates are (for the tests)."""
+    from .dynamics.models import cr3bp
+    f = cr3bp(mu, exhaust_speed)
+    c = exhaust_speed
+
+    def hamiltonian(z, law_z):
+        lvx, lvy, lvz, lm = law_z[10], law_z[11], law_z[12], law_z[13]
+        lv = dm.sqrt(lvx * lvx + lvy * lvy + lvz * lvz + PRIMER_FLOOR ** 2)
+        switch = lv * c / law_z[6] + lm - 1.0
+        thrust = (dm.tanh(switch * (1.0 / rho)) + 1.0) * (0.5 * u_max)
+        u = [-lvx * thrust / lv, -lvy * thrust / lv, -lvz * thrust / lv]
+        x = [z[i] for i in range(7)]
+        dx = f.f(0.0, x, dm.vector(u + [thrust]))
+        return sum(z[7 + i] * dx[i] for i in range(7)) + thrust / c
+    return hamiltonian
+
+
+class CostateStep:
+    """The stage map of a costate-controlled stage: x_{k+1} = the state part of the
+    state-costate flow from [x_k, lambda_k] over the stage (``problem.StageStep`` protocol:
+    x (7, B), lambda (7, B) as the control, floats or DA)."""
+
+    def __init__(self, rhs: Dynamics, tol: float = 1e-12, derivative_tol: float = 1e-9):
+        from .problem import FlowStep
+        self.flow14 = FlowStep(rhs, "rk78", tol, 0, derivative_tol)
+        self.takes_t0 = True
+
+    def __call__(self, x, lam, dt, t0=0.0):
+        z = dm.concatenate([x, lam])
+        return self.flow14(z, lam, dt, t0)[:7]
+
+    def flow(self, x, lam, dt, t0=0.0):
+        import numpy as np
+        return np.asarray(self.flow14.flow(np.concatenate([x, lam]), lam, dt, t0))[:7]
+
+    def expand(self, x, lam, dt, values, t0=0.0):
+        F = self(x, lam, dt, t0)
+        F.c[0] = values
+        return F
+
+    def probe(self, x, lam, dt, t0=0.0):
+        return self(x, lam, dt, t0)
+
+
+def costate_problem(case, stages: int, rho: float):
+    """The catalogue CR3BP ``case`` with ``stages`` costate-controlled stages of equal length
+    at throttle sharpness ``rho``: controls lambda_k (7), cost -m_N (the propellant), terminal
+    position and velocity on the target (``Problem.g_teq``)."""
+    import numpy as np
+
+    from .problem import Problem
+    units = case.units
+    if case.system != "earth_moon_cr3bp":
+        raise ValueError(f"costate stages are built for the Earth-Moon CR3BP, not "
+                         f"{case.system!r}")
+    c = case.spacecraft.exhaust_speed(units)
+    u_max = float(units.thrust(case.spacecraft.max_thrust_n))
+    step = CostateStep(cr3bp_costate(units.gm, c, u_max, rho))
+    x0 = np.asarray(case.cartesian_x0(), float)
+    xt = np.r_[np.asarray(case.x_target, float)[:6], 0.0]
+    return Problem(name=f"{case.name}_costate", nu=7, x0=x0, x_target=xt,
+                   stage_dt=np.full(stages, case.tof / stages), step=step,
+                   stage_cost=lambda x, lam, dt, hom=(0.0, 1.0): 0.0 * lam[0],
+                   terminal_cost=lambda x, xt: -x[6] + 0.0 * x[0],
+                   g_teq=lambda x, xt: x[:6] - xt[:6], units=units,
+                   spacecraft=case.spacecraft, mass_index=6)
