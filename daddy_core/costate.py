@@ -32,6 +32,15 @@ from .dynamics.rhs import Dynamics
 PRIMER_FLOOR = 1e-12
 
 
+def primer_law(lvx, lvy, lvz, lm, m, c: float, u_max: float, rho: float):
+    """(T, |lambda_v|): the smoothed throttle's thrust magnitude and the regularised primer
+    magnitude for the costates lambda_v, lambda_m at mass m (module docstring); the thrust
+    points along -lambda_v."""
+    lv = dm.sqrt(lvx * lvx + lvy * lvy + lvz * lvz + PRIMER_FLOOR ** 2)
+    switch = lv * c / m + lm - 1.0
+    return (dm.tanh(switch * (1.0 / rho)) + 1.0) * (0.5 * u_max), lv
+
+
 def cr3bp_costate(mu: float, exhaust_speed: float, u_max: float, rho: float) -> Dynamics:
     """The state-costate right-hand side z' = F(z) of the CR3BP with mass, z = [r (3), v (3),
     m, lambda_r (3), lambda_v (3), lambda_m] (14, *batch), normalised units, throttle sharpness
@@ -51,9 +60,7 @@ def cr3bp_costate(mu: float, exhaust_speed: float, u_max: float, rho: float) -> 
         q1, q2 = k1 * 3.0 / r1s, k2 * 3.0 / r2s       # 3 (1 - mu) / r1^5, 3 mu / r2^5
         ksum = k1 + k2
         inv_m = 1.0 / m
-        lv = dm.sqrt(lvx * lvx + lvy * lvy + lvz * lvz + PRIMER_FLOOR ** 2)
-        switch = lv * c * inv_m + lm - 1.0
-        thrust = (dm.tanh(switch * (1.0 / rho)) + 1.0) * (0.5 * u_max)
+        thrust, lv = primer_law(lvx, lvy, lvz, lm, m, c, u_max, rho)
         a = thrust * inv_m / lv                       # thrust acceleration per unit primer
         ax = vy * 2.0 + px - d1 * k1 - d2 * k2 - lvx * a
         ay = vx * -2.0 + py - py * ksum - lvy * a
@@ -84,9 +91,7 @@ def cr3bp_hamiltonian(mu: float, exhaust_speed: float, u_max: float, rho: float)
 
     def hamiltonian(z, law_z):
         lvx, lvy, lvz, lm = law_z[10], law_z[11], law_z[12], law_z[13]
-        lv = dm.sqrt(lvx * lvx + lvy * lvy + lvz * lvz + PRIMER_FLOOR ** 2)
-        switch = lv * c / law_z[6] + lm - 1.0
-        thrust = (dm.tanh(switch * (1.0 / rho)) + 1.0) * (0.5 * u_max)
+        thrust, lv = primer_law(lvx, lvy, lvz, lm, law_z[6], c, u_max, rho)
         u = [-lvx * thrust / lv, -lvy * thrust / lv, -lvz * thrust / lv]
         x = [z[i] for i in range(7)]
         dx = f.f(0.0, x, dm.vector(u + [thrust]))
@@ -99,9 +104,11 @@ class CostateStep:
     state-costate flow from [x_k, lambda_k] over the stage (``problem.StageStep`` protocol:
     x (7, B), lambda (7, B) as the control, floats or DA)."""
 
-    def __init__(self, rhs: Dynamics, tol: float = 1e-12, derivative_tol: float = 1e-9):
+    def __init__(self, rhs: Dynamics, law: tuple, tol: float = 1e-12,
+                 derivative_tol: float = 1e-9):
         from .problem import FlowStep
         self.flow14 = FlowStep(rhs, "rk78", tol, 0, derivative_tol)
+        self.law = law            # (c, u_max, rho) of ``primer_law``
         self.takes_t0 = True
 
     def __call__(self, x, lam, dt, t0=0.0):
@@ -134,7 +141,7 @@ def costate_problem(case, stages: int, rho: float):
                          f"{case.system!r}")
     c = case.spacecraft.exhaust_speed(units)
     u_max = float(units.thrust(case.spacecraft.max_thrust_n))
-    step = CostateStep(cr3bp_costate(units.gm, c, u_max, rho))
+    step = CostateStep(cr3bp_costate(units.gm, c, u_max, rho), (c, u_max, rho))
     x0 = np.asarray(case.cartesian_x0(), float)
     xt = np.r_[np.asarray(case.x_target, float)[:6], 0.0]
     return Problem(name=f"{case.name}_costate", nu=7, x0=x0, x_target=xt,
@@ -143,3 +150,33 @@ def costate_problem(case, stages: int, rho: float):
                    terminal_cost=lambda x, xt: -x[6] + 0.0 * x[0],
                    g_teq=lambda x, xt: x[:6] - xt[:6], units=units,
                    spacecraft=case.spacecraft, mass_index=6)
+
+
+def thrust_schedule(problem, lam, stages: int, points: int = 8):
+    """The thrust of a costate-controlled solution (controls ``lam`` (N, 7) of ``problem``,
+    ``costate_problem``'s) averaged over each of ``stages`` equal stages of the same time of
+    flight: (stages, 3), normalised -- a warm start for a thrust-controlled solve of those
+    stages (the polish to the exact bang-bang optimum). The law is sampled at ``points``
+    Gauss-Legendre nodes per stage."""
+    import numpy as np
+
+    from .integrators import rk78
+    rhs = problem.step.flow14.rhs
+    lam = np.asarray(lam, float)
+    edges = np.r_[0.0, np.cumsum(problem.stage_dt)]
+    fine = np.linspace(0.0, edges[-1], stages + 1)
+    nodes, weights = np.polynomial.legendre.leggauss(points)
+    U = np.zeros((stages, 3))
+    x = np.asarray(problem.x0, float)
+    z, k, t = np.r_[x, lam[0]], 0, 0.0
+    for j in range(stages):
+        a, b = fine[j], fine[j + 1]
+        for s, w in zip(a + (nodes + 1) * (b - a) / 2, weights):
+            while s > edges[k + 1]:                     # on to the costate stage holding s
+                z = rk78(rhs, z, None, t, edges[k + 1] - t, tol=1e-12)
+                k, t = k + 1, edges[k + 1]
+                z = np.r_[z[:7], lam[k]]
+            z, t = rk78(rhs, z, None, t, s - t, tol=1e-12) if s > t else z, s
+            thrust, lv = primer_law(*z[10:14], z[6], *problem.step.law)
+            U[j] += w / 2 * thrust * -z[10:13] / lv
+    return U
