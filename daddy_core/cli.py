@@ -9,6 +9,7 @@ import argparse
 import json
 import math
 import sys
+from pathlib import Path
 from datetime import datetime, timedelta, timezone
 
 import numpy as np
@@ -22,6 +23,7 @@ from .catalogue.revolutions import RevolutionSearch, search_revolutions
 from .catalogue.sail_cases import (SAIL_METHOD, SailCase, SailGuess, sail_options, solve_sail,
                                    write_sail_csv)
 from .catalogue.run_times import expected_run_time, measured_on, read_run_times
+from .pddp import Parametrisation, PDDPOptions
 from .solver import METHODS, Globalization, Solution, case_options, solve
 
 
@@ -72,6 +74,17 @@ def _parser() -> argparse.ArgumentParser:
                         "around the case's own for the heaviest final mass (golden section)")
     s.add_argument("--search-tol", type=float, default=None, metavar="REVS",
                    help="the search's final bracket in revolutions (default SPAN / 20)")
+    s.add_argument("--parametrisation", choices=[p.value for p in Parametrisation],
+                   default=Parametrisation.THRUST.value,
+                   help="costate: Pontryagin-Bellman DDP over the costates of a few long stages, "
+                        "then polished to the exact optimum (Earth-Moon CR3BP cases; "
+                        "docs/costate-stages.md)")
+    s.add_argument("--costate-stages", type=int, default=PDDPOptions.stages, metavar="N",
+                   help="--parametrisation costate: the costate stages")
+    s.add_argument("--sharpness", type=float, nargs="+", metavar="RHO",
+                   default=list(PDDPOptions.sharpness),
+                   help="--parametrisation costate: the throttle sharpness rho of each "
+                        "continuation step")
     s.add_argument("--quiet", action="store_true", help="no progress lines")
     sub.add_parser("list", help="list the catalogue cases")
     q = sub.add_parser("predict", help="a case's terminal dispersion from an initial-state "
@@ -120,6 +133,8 @@ def main(argv=None) -> int:
         if args.guess:
             raise DaddyError("--guess is for solar-sail cases; give a thrust case's initial "
                              "controls with --warm-start")
+        if Parametrisation(args.parametrisation) is Parametrisation.COSTATE:
+            return _solve_costate(case, args)
         args.method = args.method or "dyn"
         if args.oem and not case.staged_in_angle:
             raise DaddyError(f"--oem: an OEM is for Earth-centred cases; {case.name!r} is "
@@ -212,6 +227,56 @@ def _report_phase(ph: dict) -> None:
           + (f"; parameters {values}" if values else "")
           + ("" if link is None else "; link multipliers "
              + " ".join(f"{v:.9g}" for v in link)))
+
+
+def _solve_costate(case, args) -> int:
+    """``daddy solve CASE --parametrisation costate``: PDDP (``pddp.solve_pddp``) reported, then
+    its polish to the exact optimum (unless --no-polish); --json holds the polished solution
+    with the costate solve under ``pddp``. A DaddyError for bad input (exit status 2)."""
+    from .pddp import polish, solve_pddp, throttle_switches
+    refused = [name for name, given in (
+        ("--method", args.method), ("--energy", args.energy), ("--warm-start", args.warm_start),
+        ("--r-min-km", args.r_min_km), ("--search-revolutions", args.search_revolutions),
+        ("--free-tof", args.free_tof), ("--free-revolutions", args.free_revolutions),
+        ("--policy", args.policy), ("--oem", args.oem)) if given]
+    if refused:
+        raise DaddyError(f"{', '.join(refused)}: not with --parametrisation costate (PDDP "
+                         "solves the fuel-optimal transfer over costates, hessdyn)")
+    progress = None if args.quiet else (lambda line: print(line, flush=True))
+    opts = PDDPOptions(stages=args.costate_stages, sharpness=tuple(args.sharpness))
+    if args.time_budget or args.globalization:
+        raise DaddyError("--time-budget, --globalization: not with --parametrisation costate")
+    r = solve_pddp(case, options=opts, progress=progress)
+    steps = ", ".join(f"rho {rho:g}: {'converged' if ok else 'not converged'} {m:.3f} kg"
+                      for rho, ok, m in r.steps)
+    print(f"PDDP {case.name}: {len(r.sigma)} costate stages, {steps}")
+    print(f"  final mass {r.final_mass_kg:.3f} kg at rho {r.rho:g}, {r.switches} switches, "
+          f"max violation {r.solution.max_violation:.2e}, {r.cpu_s:.1f} s CPU")
+    if not r.solution.converged:
+        print(f"daddy: not converged: PDDP: {r.solution.reason}", file=sys.stderr)
+        return 1
+    if args.no_polish:
+        sol = r.solution
+    else:
+        sol = polish(case, r, stages=args.stages, progress=progress)
+        _report(sol)
+        u_max = float(case.units.thrust(case.spacecraft.max_thrust_n))
+        print(f"  polished from PDDP: {throttle_switches(sol, u_max)} switches")
+    if args.json:
+        d = sol.to_dict()
+        d["pddp"] = r.to_dict()
+        Path(args.json).write_text(json.dumps(d, indent=1, allow_nan=False))
+    for flag, write in ((args.npz, sol.to_npz), (args.csv, lambda f: trajectory_output.write_csv(
+            sol, f))):
+        if flag:
+            write(flag)
+    if args.plot:
+        from .plotting import plot_solution
+        plot_solution(sol, args.plot, u_max_n=case.spacecraft.max_thrust_n)
+    if not sol.converged:
+        print(f"daddy: not converged: {sol.reason}", file=sys.stderr)
+        return 1
+    return 0
 
 
 def _solve_sail(case: SailCase, args) -> int:

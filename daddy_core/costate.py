@@ -28,6 +28,7 @@ from __future__ import annotations
 
 from .da import functions as dm
 from .dynamics.rhs import Dynamics
+from .problem import FlowStep, StageStep
 
 PRIMER_FLOOR = 1e-12
 
@@ -99,38 +100,49 @@ def cr3bp_hamiltonian(mu: float, exhaust_speed: float, u_max: float, rho: float)
     return hamiltonian
 
 
-class CostateStep:
-    """The stage map of a costate-controlled stage: x_{k+1} = the state part of the
-    state-costate flow from [x_k, lambda_k] over the stage (``problem.StageStep`` protocol:
-    x (7, B), lambda (7, B) as the control, floats or DA)."""
+def costate_scale(exhaust_speed: float, m0: float):
+    """(7,) the costates' units: lambda = scale * sigma with sigma the stage's decision
+    variables. lambda_r and lambda_v in m0 / c, lambda_m in 1, so that a unit change of any
+    sigma moves the switching function S by O(1) (S = |lambda_v| c / m + lambda_m - 1): the
+    trust region, a sphere in sigma, then bounds the costates' effects alike (the paper's
+    scaling matrix, whose values were lost in its text)."""
+    import numpy as np
+    return np.r_[np.full(6, m0 / exhaust_speed), 1.0]
 
-    def __init__(self, rhs: Dynamics, law: tuple, tol: float = 1e-12,
+
+class CostateStep(StageStep):
+    """The stage map of a costate-controlled stage: x_{k+1} = the state part of the
+    state-costate flow from [x_k, lambda_k] over the stage, lambda_k = scale * sigma_k
+    (``problem.StageStep`` protocol: x (7, B), sigma (7, B) as the control, floats or DA)."""
+
+    def __init__(self, rhs: Dynamics, law: tuple, scale, tol: float = 1e-12,
                  derivative_tol: float = 1e-9):
-        from .problem import FlowStep
+        import numpy as np
+        super().__init__(self.__call__, takes_t0=True)
         self.flow14 = FlowStep(rhs, "rk78", tol, 0, derivative_tol)
         self.law = law            # (c, u_max, rho) of ``primer_law``
-        self.takes_t0 = True
+        self.scale = np.asarray(scale, float)
 
-    def __call__(self, x, lam, dt, t0=0.0):
-        z = dm.concatenate([x, lam])
-        return self.flow14(z, lam, dt, t0)[:7]
+    def costates(self, sigma):
+        """lambda (7, *batch) of the decision variables sigma (7, *batch), floats or DA."""
+        extra = len(sigma.shape) - 1
+        return sigma * self.scale.reshape((7,) + (1,) * extra)
 
-    def flow(self, x, lam, dt, t0=0.0):
+    def __call__(self, x, sigma, dt, t0=0.0):
+        lam = self.costates(sigma)
+        return self.flow14(dm.concatenate([x, lam]), lam, dt, t0)[:7]
+
+    def flow(self, x, sigma, dt, t0=0.0):
         import numpy as np
+        lam = self.costates(np.asarray(sigma, float))
         return np.asarray(self.flow14.flow(np.concatenate([x, lam]), lam, dt, t0))[:7]
 
-    def expand(self, x, lam, dt, values, t0=0.0):
-        F = self(x, lam, dt, t0)
-        F.c[0] = values
-        return F
-
-    def probe(self, x, lam, dt, t0=0.0):
-        return self(x, lam, dt, t0)
 
 
 def costate_problem(case, stages: int, rho: float):
     """The catalogue CR3BP ``case`` with ``stages`` costate-controlled stages of equal length
-    at throttle sharpness ``rho``: controls lambda_k (7), cost -m_N (the propellant), terminal
+    at throttle sharpness ``rho``: controls sigma_k (7, ``costate_scale``), cost m_0 - m_N (the
+    propellant, without the constant a relative stopping test would drown it in), terminal
     position and velocity on the target (``Problem.g_teq``)."""
     import numpy as np
 
@@ -141,19 +153,20 @@ def costate_problem(case, stages: int, rho: float):
                          f"{case.system!r}")
     c = case.spacecraft.exhaust_speed(units)
     u_max = float(units.thrust(case.spacecraft.max_thrust_n))
-    step = CostateStep(cr3bp_costate(units.gm, c, u_max, rho), (c, u_max, rho))
     x0 = np.asarray(case.cartesian_x0(), float)
+    step = CostateStep(cr3bp_costate(units.gm, c, u_max, rho), (c, u_max, rho),
+                       costate_scale(c, x0[6]))
     xt = np.r_[np.asarray(case.x_target, float)[:6], 0.0]
     return Problem(name=f"{case.name}_costate", nu=7, x0=x0, x_target=xt,
                    stage_dt=np.full(stages, case.tof / stages), step=step,
                    stage_cost=lambda x, lam, dt, hom=(0.0, 1.0): 0.0 * lam[0],
-                   terminal_cost=lambda x, xt: -x[6] + 0.0 * x[0],
+                   terminal_cost=lambda x, xt: (x0[6] - x[6]) + 0.0 * x[0],
                    g_teq=lambda x, xt: x[:6] - xt[:6], units=units,
                    spacecraft=case.spacecraft, mass_index=6)
 
 
-def thrust_schedule(problem, lam, stages: int, points: int = 8):
-    """The thrust of a costate-controlled solution (controls ``lam`` (N, 7) of ``problem``,
+def thrust_schedule(problem, sigma, stages: int, points: int = 8):
+    """The thrust of a costate-controlled solution (controls ``sigma`` (N, 7) of ``problem``,
     ``costate_problem``'s) averaged over each of ``stages`` equal stages of the same time of
     flight: (stages, 3), normalised -- a warm start for a thrust-controlled solve of those
     stages (the polish to the exact bang-bang optimum). The law is sampled at ``points``
@@ -162,7 +175,7 @@ def thrust_schedule(problem, lam, stages: int, points: int = 8):
 
     from .integrators import rk78
     rhs = problem.step.flow14.rhs
-    lam = np.asarray(lam, float)
+    lam = problem.step.costates(np.asarray(sigma, float).T).T
     edges = np.r_[0.0, np.cumsum(problem.stage_dt)]
     fine = np.linspace(0.0, edges[-1], stages + 1)
     nodes, weights = np.polynomial.legendre.leggauss(points)

@@ -19,9 +19,10 @@ SAIL_CASES = ("geo_sail_2d_3rev", "geo_sail_3rev", "acs3_3rev", "acs3_3rev_j2", 
 
 
 def test_all_cases_present_and_consistent():
-    assert (set(EXPECTED) | {"double_integrator", "two_phase_lq", "dro_dro_pddp"}
-            | set(SAIL_CASES) == set(list_cases()))
-    # two_phase_lq: test_phased_cases.py; dro_dro_pddp (issue 48's spacecraft): test_costate.py
+    assert (set(EXPECTED) | {"double_integrator", "two_phase_lq", "dro_dro_pddp",
+                             "dro_dro_2rev_pddp"} | set(SAIL_CASES) == set(list_cases()))
+    # two_phase_lq: test_phased_cases.py; dro_dro_pddp, dro_dro_2rev_pddp (issue 48's
+    # spacecraft): test_costate.py
     for name, (tof_days, n) in EXPECTED.items():
         c = load_case(name)
         assert c.stages == n

@@ -62,3 +62,31 @@ def test_the_issues_dro_case_thrust_controlled_reaches_the_direct_optimum(case):
     sol = solve(problem, guess, fuel_optimal=True, options=case_options(case, True))
     assert sol.converged and sol.max_violation < 1e-10
     assert sol.final_mass_kg >= 1991.90
+
+
+def test_pddp_on_the_issues_dro_case_and_its_polish_reach_the_window(case):
+    """Issue 48's 1-revolution table row: PDDP (5 costate stages from the default guess,
+    thrust along the departure velocity) >= 1990.8 kg, meeting the target; its thrust schedule
+    polished to the exact bang-bang optimum >= 1991.90 kg (the direct transcription's
+    1991.906), with the switching structure of a bang-bang answer."""
+    from daddy_core.pddp import polish, solve_pddp, throttle_switches
+    r = solve_pddp(case)
+    assert r.solution.converged and r.solution.max_violation < 1e-9
+    assert r.final_mass_kg >= 1990.8
+    assert np.all(np.isfinite(r.costates)) and r.costates.shape == (5, 7)
+    sol = polish(case, r)
+    assert sol.converged and sol.exact_fuel and sol.max_violation < 1e-9
+    assert sol.final_mass_kg >= 1991.90
+    u_max = float(case.units.thrust(case.spacecraft.max_thrust_n))
+    assert throttle_switches(sol, u_max) % 2 == 0 and throttle_switches(sol, u_max) >= 2
+
+
+def test_a_bad_guess_or_option_is_named(case):
+    from daddy_core.errors import DaddyError
+    from daddy_core.pddp import PDDPOptions, solve_pddp
+    with pytest.raises(DaddyError, match="guess"):
+        solve_pddp(case, np.zeros((3, 7)), PDDPOptions(stages=10))
+    with pytest.raises(DaddyError, match="sharpness"):
+        PDDPOptions(sharpness=(1.0, 0.0))
+    with pytest.raises(DaddyError, match="stages"):
+        PDDPOptions(stages=0)

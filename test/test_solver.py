@@ -599,6 +599,27 @@ def test_trust_region_inverse_puts_the_step_on_the_boundary(nu):
             np.testing.assert_allclose(Minv, np.linalg.inv(Q + lam * np.eye(nu)), rtol=1e-6)
 
 
+@pytest.mark.parametrize("nu", [2, 3, 7])
+def test_an_indefinite_stages_trust_region_step_is_the_subproblems_minimiser(nu):
+    """An indefinite Quu (``backward_sweep``'s indefinite stages): the step -(Quu + lam I)^-1 Qu
+    lies on the boundary (to 1e-3) with Quu + lam I positive definite, and no point of the
+    region sampled at random models a lower cost Qu.a + a.Quu.a / 2 (the TRQP's global
+    minimiser, Conn, Gould & Toint Thm 7.2.1)."""
+    from daddy_core.solver.linalg import trust_region_inverse
+    rng = np.random.default_rng(40 + nu)
+    for _ in range(20):
+        V, _ = np.linalg.qr(rng.normal(size=(nu, nu)))
+        w = rng.uniform(0.1, 10.0, nu) * np.where(np.arange(nu) < nu // 2, -1.0, 1.0)
+        Q, Qu, radius = (V * w) @ V.T, rng.normal(size=nu), rng.uniform(0.05, 2.0)
+        a = -trust_region_inverse(Q, Qu, 0.0, radius) @ Qu
+        assert np.linalg.norm(a) == pytest.approx(radius, rel=1.1e-3)
+        model = lambda d: Qu @ d + 0.5 * d @ Q @ d
+        trial = rng.normal(size=(2000, nu))
+        trial *= radius * rng.uniform(0, 1, (2000, 1)) ** (1 / nu) / np.linalg.norm(
+            trial, axis=1, keepdims=True)
+        assert model(a) <= min(model(d) for d in trial) + 1e-9
+
+
 @pytest.mark.parametrize("stages", [17, 40])
 def test_trust_region_reaches_the_same_optima_as_the_line_search(stages):
     """Globalization.TRUST_REGION on problems with an independent answer: the double

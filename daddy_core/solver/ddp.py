@@ -45,7 +45,7 @@ class DDPResult(StepResult):
 
 
 def _sweep(st: Stages, sweep: Sweep, rho: float, stats: DDPStats,
-           radius: float | np.ndarray = math.inf) -> Gains | None:
+           radius: float | np.ndarray = math.inf, indefinite: bool = False) -> Gains | None:
     """A backward sweep; far from the optimum the dynamics-Hessian terms can make Q_uu
     indefinite through V_xx, and the Gauss-Newton (Std) sweep at the same rho is taken
     instead."""
@@ -53,7 +53,7 @@ def _sweep(st: Stages, sweep: Sweep, rho: float, stats: DDPStats,
     # a diverging iterate overflows Q to inf / nan: the regularised inverse rejects it (rho is
     # raised), so numpy's warnings would only be noise on the user's terminal
     with np.errstate(over="ignore", invalid="ignore"):
-        gains = backward_sweep(st, sweep, rho, radius)
+        gains = backward_sweep(st, sweep, rho, radius, indefinite)
         if gains is None and sweep is not Sweep.STD:
             gains = backward_sweep(st, Sweep.STD, rho, radius)
     stats.backward_s += time.perf_counter() - t0
@@ -100,7 +100,7 @@ def _iteration(cur: _Nominal, method: Method, ctl: StepControl, stop: Stopping,
     """One iteration of Alg. 3 on ``cur`` (updated in place): the status it ends the solve
     with, or None."""
     st = cur.st
-    gains = _sweep(st, method.sweep, ctl.rho, stats, ctl.sweep_radius)
+    gains = _sweep(st, method.sweep, ctl.rho, stats, ctl.sweep_radius, ctl.trust_region)
     if gains is None:
         return ctl.indefinite()
     cur.gains = gains

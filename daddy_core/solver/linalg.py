@@ -78,7 +78,7 @@ def trust_region_inverse(Quu: np.ndarray, Qu: np.ndarray, rho: float,
     """(Quu + lam I)^-1 with the shift lam >= rho that puts the step -(Quu + lam I)^-1 Qu on the
     trust-region boundary |a| = radius (the trust-region subproblem min Qu.a + a.Quu.a / 2,
     |a| <= radius, of HDDP and the many-revolution DDP paper's section III.F; Quu + rho I is
-    positive definite and its step is outside the region). The shift solves the secular
+    positive definite and its step is outside the region, or Quu indefinite). The shift solves the secular
     equation 1/|a(lam)| = 1/radius by Newton's method (Conn, Gould & Toint Alg. 7.3.4's
     iteration; nearly linear in lam, so a few iterations reach 1e-3 of the radius): unlike
     a rescaled Newton step it turns the step towards the gradient where Quu is ill-conditioned,
@@ -87,7 +87,10 @@ def trust_region_inverse(Quu: np.ndarray, Qu: np.ndarray, rho: float,
         return np.zeros_like(Quu)
     w, V = np.linalg.eigh(Quu)
     g = V.T @ Qu
-    lam = rho
+    # an indefinite Quu + rho I (``backward_sweep``'s indefinite stages): the boundary step has
+    # lam > -w_min (Conn, Gould & Toint Thm 7.2.1), and Newton's iteration from just above
+    # -w_min rises monotonically to it
+    lam = max(rho, -float(w[0]) + 1e-9 * max(1.0, float(np.max(np.abs(w)))))
     for _ in range(30):
         d = w + lam
         s2 = float(np.sum((g / d) ** 2))

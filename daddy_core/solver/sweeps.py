@@ -175,10 +175,15 @@ def _cost_to_go(Qb: np.ndarray, Kk: np.ndarray, G: np.ndarray, nx: int,
 
 
 def backward_sweep(st: Stages, sweep: Sweep, rho: float,
-                   radius: float | np.ndarray = math.inf) -> Gains | None:
+                   radius: float | np.ndarray = math.inf,
+                   indefinite: bool = False) -> Gains | None:
     """One backward sweep; returns None when Q_uu + rho I is not positive definite. radius: the
     trust region of each stage's step |a_k| (``linalg.trust_region_inverse``; inf: none), one for
-    all stages or (N,) one per stage.
+    all stages or (N,) one per stage. indefinite: a stage whose Q_uu + rho I is indefinite but
+    whose radius is finite takes the trust-region subproblem's step on the region's boundary
+    (Conn, Gould & Toint, the HDDP and PDDP papers' TRQP) instead of failing the sweep: the
+    negative curvature is a direction of descent, not a reason to regularise it away
+    (docs/design-notes.md: indefinite trust-region stages).
 
     Cost-to-go and Q are carried as bordered matrices (``_bordered``): V_k = [[V_xx, V_x],
     [V_x^T, .]] (nx+1), Q_k = [[Q_zz, Q_z], [Q_z^T, .]] (n+1), z = [dx, du]. Then eq. 3 (without
@@ -207,6 +212,11 @@ def backward_sweep(st: Stages, sweep: Sweep, rho: float,
         radius = radii[k]
         Qb_gn, Qb = _stage_q(st, k, L[k], Jb[k], Vb, sweep, fzz)
         Minv = regularised_inverse(Qb[nx:n, nx:n], rho)
+        bounded = (Minv is None and indefinite and radius < math.inf
+                   and bool(np.isfinite(Qb[nx:n]).all()))   # (an overflowed Q: rho is raised)
+        if bounded:
+            Minv = trust_region_inverse(Qb[nx:n, nx:n], Qb[nx:n, n], rho, radius)
+            clipped += 1
         if Minv is None and Qb is not Qb_gn:
             # the dynamics-Hessian terms make Q_uu indefinite at this stage (e.g. the mass-flow
             # term |u| near zero thrust): use the Gauss-Newton Q of this stage instead
@@ -216,7 +226,7 @@ def backward_sweep(st: Stages, sweep: Sweep, rho: float,
             return None
         Qu_rows[k] = Qb[nx:n]
         Kk = np.matmul(Minv, Qb[nx:n], out=K[k])   # eq. 4-5: a_k = -Kk[:, n], b_k = -Kk[:, :nx]
-        if radius < math.inf and (full := math.sqrt(Kk[:, n] @ Kk[:, n])) > radius:
+        if not bounded and radius < math.inf and (full := math.sqrt(Kk[:, n] @ Kk[:, n])) > radius:
             Minv = trust_region_inverse(Qb[nx:n, nx:n], Qb[nx:n, n], rho, radius)
             np.matmul(Minv, Qb[nx:n], out=Kk)
             clipped += 1
