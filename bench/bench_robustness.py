@@ -20,6 +20,9 @@ casadi``), with the same cap, judged the same way on its controls re-flown in da
 flows (IPOPT's success status, the re-flown arrival within ``casadi_peer.PEER_MISS``, the mass in
 the window); the two are printed side by side with the guesses each alone solved.
 
+``--costate``: PDDP (issue 48) from random costate guesses beside scipy single shooting, the
+same guesses for both (``bench_pddp.py robustness``, whose docstring defines them).
+
 ``--r-min-km``: the case with a keep-out sphere around the Moon (or the Sun) held along the
 whole trajectory (issue 23); success then also needs the dense re-propagation's margin >= 0
 (``Solution.min_path_margin`` >= -1e-10), and the window is centred on ``--reference-kg`` (the
@@ -160,7 +163,14 @@ def main() -> int:
                     help="keep-out sphere around the Moon (Sun) held along the trajectory")
     ap.add_argument("--reference-kg", type=float, default=None,
                     help="centre of the success window (default: the paper's mass)")
+    ap.add_argument("--costate", action="store_true",
+                    help="PDDP from random costate guesses beside scipy single shooting "
+                         "(bench_pddp.py robustness; Earth-Moon CR3BP cases)")
     args = ap.parse_args()
+    if args.costate:   # the costate parametrisation's own guesses and peer (issue 48)
+        from bench_pddp import robustness
+        robustness(args.case, args.guesses, 1.0, args.seed, args.cap, max(1, args.jobs))
+        return 0
     if args.peer and args.r_min_km:
         ap.error("--peer has no keep-out constraint: drop --r-min-km")
     fuel = not args.energy and args.case != "double_integrator"

@@ -242,10 +242,10 @@ def _solve_costate(case, args) -> int:
     if refused:
         raise DaddyError(f"{', '.join(refused)}: not with --parametrisation costate (PDDP "
                          "solves the fuel-optimal transfer over costates, hessdyn)")
-    progress = None if args.quiet else (lambda line: print(line, flush=True))
-    opts = PDDPOptions(stages=args.costate_stages, sharpness=tuple(args.sharpness))
     if args.time_budget or args.globalization:
         raise DaddyError("--time-budget, --globalization: not with --parametrisation costate")
+    progress = None if args.quiet else (lambda line: print(line, flush=True))
+    opts = PDDPOptions(stages=args.costate_stages, sharpness=tuple(args.sharpness))
     r = solve_pddp(case, options=opts, progress=progress)
     steps = ", ".join(f"rho {rho:g}: {'converged' if ok else 'not converged'} {m:.3f} kg"
                       for rho, ok, m in r.steps)
@@ -266,10 +266,10 @@ def _solve_costate(case, args) -> int:
         d = sol.to_dict()
         d["pddp"] = r.to_dict()
         Path(args.json).write_text(json.dumps(d, indent=1, allow_nan=False))
-    for flag, write in ((args.npz, sol.to_npz), (args.csv, lambda f: trajectory_output.write_csv(
-            sol, f))):
-        if flag:
-            write(flag)
+    if args.npz:
+        sol.to_npz(args.npz)
+    if args.csv:
+        trajectory_output.write_csv(sol, args.csv)
     if args.plot:
         from .plotting import plot_solution
         plot_solution(sol, args.plot, u_max_n=case.spacecraft.max_thrust_n)

@@ -26,9 +26,12 @@ nests algebras: not built).
 """
 from __future__ import annotations
 
+import numpy as np
+
 from .da import functions as dm
 from .dynamics.rhs import Dynamics
-from .problem import FlowStep, StageStep
+from .integrators import rk78
+from .problem import FlowStep, Problem, StageStep
 
 PRIMER_FLOOR = 1e-12
 
@@ -106,7 +109,6 @@ def costate_scale(exhaust_speed: float, m0: float):
     sigma moves the switching function S by O(1) (S = |lambda_v| c / m + lambda_m - 1): the
     trust region, a sphere in sigma, then bounds the costates' effects alike (the paper's
     scaling matrix, whose values were lost in its text)."""
-    import numpy as np
     return np.r_[np.full(6, m0 / exhaust_speed), 1.0]
 
 
@@ -117,8 +119,7 @@ class CostateStep(StageStep):
 
     def __init__(self, rhs: Dynamics, law: tuple, scale, tol: float = 1e-12,
                  derivative_tol: float = 1e-9):
-        import numpy as np
-        super().__init__(self.__call__, takes_t0=True)
+        super().__init__(self.__call__, takes_t0=True)   # (its fn: the flow below)
         self.flow14 = FlowStep(rhs, "rk78", tol, 0, derivative_tol)
         self.law = law            # (c, u_max, rho) of ``primer_law``
         self.scale = np.asarray(scale, float)
@@ -133,7 +134,6 @@ class CostateStep(StageStep):
         return self.flow14(dm.concatenate([x, lam]), lam, dt, t0)[:7]
 
     def flow(self, x, sigma, dt, t0=0.0):
-        import numpy as np
         lam = self.costates(np.asarray(sigma, float))
         return np.asarray(self.flow14.flow(np.concatenate([x, lam]), lam, dt, t0))[:7]
 
@@ -144,9 +144,6 @@ def costate_problem(case, stages: int, rho: float):
     at throttle sharpness ``rho``: controls sigma_k (7, ``costate_scale``), cost m_0 - m_N (the
     propellant, without the constant a relative stopping test would drown it in), terminal
     position and velocity on the target (``Problem.g_teq``)."""
-    import numpy as np
-
-    from .problem import Problem
     units = case.units
     if case.system != "earth_moon_cr3bp":
         raise ValueError(f"costate stages are built for the Earth-Moon CR3BP, not "
@@ -171,9 +168,6 @@ def thrust_schedule(problem, sigma, stages: int, points: int = 8):
     flight: (stages, 3), normalised -- a warm start for a thrust-controlled solve of those
     stages (the polish to the exact bang-bang optimum). The law is sampled at ``points``
     Gauss-Legendre nodes per stage."""
-    import numpy as np
-
-    from .integrators import rk78
     rhs = problem.step.flow14.rhs
     lam = problem.step.costates(np.asarray(sigma, float).T).T
     edges = np.r_[0.0, np.cumsum(problem.stage_dt)]

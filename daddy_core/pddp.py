@@ -46,7 +46,6 @@ class PDDPOptions:
 
     stages: int = 5                         # costate stages (the paper's robustness runs: 5)
     sharpness: tuple = (1.0,)               # rho of each continuation step, each warm-started
-    polish_stages: int | None = None        # thrust stages of the polish (None: the case's)
     solver: SolverOptions = field(default_factory=lambda: SolverOptions().with_(
         ddp=dict(globalization=Globalization.TRUST_REGION), start=dict(restore=False),
         homotopy=((0.0, 1.0),)))

@@ -106,3 +106,23 @@ def test_pddp_two_revolutions_where_the_thrust_controlled_cold_start_fails():
     assert sol.converged and sol.exact_fuel and sol.max_violation < 1e-9
     assert sol.final_mass_kg >= 1993.34
     assert throttle_switches(sol, float(case.units.thrust(case.spacecraft.max_thrust_n))) == 8
+
+
+def test_daddy_solve_with_costate_stages_writes_the_costates(tmp_path, capsys):
+    """`daddy solve dro_dro_pddp --parametrisation costate --json F`: exit 0, the polished
+    solution's JSON with the costate solve under ``pddp`` (costates (N, 7), rho, mass); flags
+    that do not apply are refused by name (exit 2)."""
+    import json
+
+    from daddy_core.cli import main
+    out = tmp_path / "pddp.json"
+    assert main(["solve", "dro_dro_pddp", "--parametrisation", "costate", "--quiet",
+                 "--costate-stages", "5", "--json", str(out)]) == 0
+    d = json.loads(out.read_text())
+    assert d["converged"] and d["final_mass_kg"] >= 1991.90
+    assert np.array(d["pddp"]["costates"]).shape == (5, 7) and d["pddp"]["rho"] == 1.0
+    assert d["pddp"]["final_mass_kg"] >= 1990.8 and d["pddp"]["switches"] >= 2
+    assert "PDDP dro_dro_pddp: 5 costate stages" in capsys.readouterr().out
+    assert main(["solve", "dro_dro_pddp", "--parametrisation", "costate", "--method",
+                 "dyn"]) == 2
+    assert "--method" in capsys.readouterr().err
