@@ -109,3 +109,43 @@ def check_stamp(stamp_s: float, topic: str) -> None:
     if not math.isfinite(stamp_s) or stamp_s <= 0.0:
         raise InputRejected(f"{topic}.header.stamp is unset, negative or not finite "
                             f"({stamp_s!r} s)")
+
+
+class StampGuard:
+    """The flight's clock as the accepted state estimates set it. An estimate stamped more than
+    the bound from the newest accepted one (a glitch: +100 days) is rejected and changes
+    nothing -- not the re-plan policy's prediction, not the plan's stage -- unless
+    ``confirmations`` estimates in a row agree on the new clock (each within the bound of the
+    one before): the last of them is accepted and sets it. The bound is ``stages`` times the
+    longest stage of the plan in force (none without a plan, or with ``stages`` = 0)."""
+
+    def __init__(self, stages: float, confirmations: int):
+        self.stages, self.confirmations = stages, confirmations
+        self.newest: float | None = None
+        self._pending: list[float] = []
+
+    def bound_s(self, plan) -> float:
+        if plan is None or not self.stages:
+            return math.inf
+        return self.stages * float(np.max(plan.end_times_s - plan.start_times_s))
+
+    def accept(self, stamp_s: float, topic: str, plan) -> bool:
+        """Raise InputRejected (code STAMP_JUMP) for a jump not yet confirmed; True when this
+        estimate confirms a new clock, False for an ordinary one."""
+        bound = self.bound_s(plan)
+        if self.newest is None or abs(stamp_s - self.newest) <= bound:
+            self.newest = stamp_s if self.newest is None else max(self.newest, stamp_s)
+            self._pending = []
+            return False
+        if not (self._pending and abs(stamp_s - self._pending[-1]) <= bound):
+            self._pending = []
+        self._pending.append(stamp_s)
+        if len(self._pending) >= self.confirmations:
+            self.newest, self._pending = stamp_s, []
+            return True
+        raise InputRejected(
+            f"{topic}.header.stamp is {stamp_s - self.newest:+.6g} s from the newest accepted "
+            f"estimate, beyond max_stamp_jump_stages ({bound:.6g} s); {len(self._pending)} of "
+            f"stamp_jump_confirmations = {self.confirmations} estimates in a row would set the "
+            f"new clock", Code.STAMP_JUMP)
+

@@ -69,6 +69,15 @@ class PlannerConfig:
                                         "otherwise; 0: the full rating", bounds=(0.0, 0.99))
     staleness_s: float = option(600.0, "estimates older than this relative to the request are "
                                        "rejected [s]", runtime=True, bounds=(1e-3, 1e9))
+    max_stamp_jump_stages: float = option(2.0, "a state estimate stamped more than this many "
+                                                "of the plan's longest stages from the newest "
+                                                "accepted one is rejected (STAMP_JUMP) and "
+                                                "changes nothing (0: no test)",
+                                          bounds=(0.0, 1e9))
+    stamp_jump_confirmations: int = option(3, "... unless this many estimates in a row agree "
+                                              "on the new clock: the last sets it, and the node "
+                                              "re-plans from it (CLOCK_CHANGED)",
+                                           bounds=(1, 1000))
     # a mass estimate may exceed the wet mass by this [kg] (not a node parameter)
     mass_tolerance_kg: float = 1e-6
 

@@ -18,7 +18,7 @@ import numpy as np
 
 from daddy_core.errors import DaddyError
 
-from .checks import InputRejected
+from .checks import InputRejected, StampGuard
 from .feedback import FeedbackLaws
 from .plan import Code, Level, Plan
 from .planner import GuidancePlanner
@@ -62,6 +62,8 @@ class GuidanceSession:
         self._withheld: list[float] = []   # estimate stamps whose thrust waits for a re-plan
         self._withheld_lock = threading.Lock()
         self._replan_on_first_estimate = False
+        self.stamps = StampGuard(planner.config.max_stamp_jump_stages,
+                                 planner.config.stamp_jump_confirmations)
         self._worker = threading.Thread(target=self._work, name="daddy_replan", daemon=True)
         self._worker.start()
         if persist_file and Path(persist_file).exists():
@@ -72,12 +74,27 @@ class GuidanceSession:
         """An estimate whose frame the node has checked (InputRejected naming the field when
         the planner's checks refuse it)."""
         self.planner.checks.check_estimate(est.pos_m, est.vel_m_s, stamp)
+        new_clock = self.stamps.accept(stamp, "state_estimate", self.planner.plan)
         self.queue.add_state(est.pos_m, est.vel_m_s, stamp, est.pos_sigma_m, est.vel_sigma_m_s)
         plan = self.planner.plan or self._adopt_nominal()
         # an estimate that triggers a re-plan gets its thrust command after it (_finish)
-        if plan is not None and not self._self_triggered(est, stamp, plan):
+        if plan is not None and new_clock:
+            self._replan_on_new_clock(stamp)
+        elif plan is not None and not self._self_triggered(est, stamp, plan):
             self.out.publish_thrust(plan.command_at(stamp, est.pos_m, est.vel_m_s), stamp)
         self._maybe_replan_after_restart()
+
+    def _replan_on_new_clock(self, stamp: float) -> None:
+        """Estimates in a row set a new flight clock (``checks.StampGuard``): the plan's stage
+        and the re-plan policy's prediction belong to the old one, so the node re-plans from
+        this estimate, withholding its thrust command until then, and says so (WARN)."""
+        self.out.diag(Level.WARN, Code.CLOCK_CHANGED,
+                      f"{self.stamps.confirmations} state estimates in a row set a new flight "
+                      f"clock ({stamp:.3f} s): re-planning from the last",
+                      {"request_id": f"clock-{stamp:.3f}"}, stamp)
+        with self._withheld_lock:
+            self._withheld.append(stamp)
+        self.queue.enqueue(f"clock-{stamp:.3f}", stamp)
 
     def on_mass(self, mass: float, stamp: float) -> None:
         self.planner.checks.check_mass(mass, stamp)

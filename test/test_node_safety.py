@@ -1,0 +1,109 @@
+"""The guidance session's safety against bad stamps (issue 49, item 1), ROS-free: a glitch
+stamped far from the flight is rejected without touching the flight's clock, and a new clock
+is taken only from consistent estimates in a row (the node's graph: test_ros_node)."""
+import time
+
+import numpy as np
+import pytest
+
+from daddy_ros.checks import InputRejected, StampGuard
+from daddy_ros.config import TriggerConfig
+from daddy_ros.conversions import OdometryState
+from daddy_ros.plan import Code, Level
+from daddy_ros.self_trigger import ReplanTrigger
+from daddy_ros.session import GuidanceSession
+
+from test_feedback_laws import _Outputs, _planner
+
+DAY_S = 86400.0
+# stage boundaries re-plan, nothing else: the glitch must not silence them
+STAGES_ONLY = TriggerConfig(feedback_order=0, trigger_position_m=0.0,
+                            trigger_velocity_m_s=0.0, arrival_stages=0)
+
+
+def _estimate(plan, k: int, dt: float):
+    """The plan's state at stage k's start (stamped dt after it) as an estimate."""
+    x = plan.states_si[k]
+    t = float(plan.start_times_s[k]) + dt
+    return OdometryState(x[:3], x[3:6], t, "", None, None), t, float(x[6])
+
+
+def _session(config=STAGES_ONLY):
+    planner = _planner()
+    out = _Outputs()
+    session = GuidanceSession(planner, ReplanTrigger.for_planner(planner, config), "", "", out,
+                              lambda: True, None)
+    return planner, session, out
+
+
+def _wait(predicate, timeout_s=60.0):
+    end = time.monotonic() + timeout_s
+    while not predicate() and time.monotonic() < end:
+        time.sleep(0.02)
+    return predicate()
+
+
+def test_a_glitch_stamped_100_days_ahead_is_rejected_and_stage_re_plans_go_on():
+    """One estimate stamped +100 days between normal ones: rejected with STAMP_JUMP naming
+    state_estimate.header.stamp, no thrust command for it; the next stage boundary still
+    re-plans and its thrust command is published after the re-plan."""
+    planner, session, out = _session()
+    plan = planner.plan
+    try:
+        est, t, m = _estimate(plan, 3, -60.0)
+        session.on_mass(m, t)
+        session.on_state(est, t)                      # the prediction starts
+        glitch = OdometryState(est.pos_m, est.vel_m_s, t + 100 * DAY_S, "", None, None)
+        with pytest.raises(InputRejected, match=r"state_estimate\.header\.stamp") as exc:
+            session.on_state(glitch, t + 100 * DAY_S)
+        assert exc.value.code is Code.STAMP_JUMP
+        assert all(s != pytest.approx(t + 100 * DAY_S) for s, _ in out.thrust)
+        est, t, m = _estimate(plan, 4, 0.0)           # the next boundary
+        session.on_mass(m, t)
+        session.on_state(est, t)
+        assert _wait(lambda: session.replans == 1 and any(
+            s == pytest.approx(t) for s, _ in out.thrust))
+    finally:
+        session.stop()
+
+
+def test_consistent_estimates_in_a_row_set_a_new_clock_and_the_node_re_plans():
+    """A clock that really moved (1 day ahead, 3 estimates a minute apart, the default
+    confirmations): the first two are rejected, the third sets the new clock with a WARN
+    CLOCK_CHANGED and a re-plan from it, after which its thrust command is published."""
+    planner, session, out = _session()
+    plan = planner.plan
+    try:
+        est, t, m = _estimate(plan, 3, -60.0)
+        session.on_mass(m, t)
+        session.on_state(est, t)
+        shifted = [t + DAY_S + 60.0 * i for i in range(3)]
+        for s in shifted[:2]:
+            with pytest.raises(InputRejected):
+                session.on_state(OdometryState(est.pos_m, est.vel_m_s, s, "", None, None), s)
+        session.on_mass(m, shifted[2])
+        session.on_state(OdometryState(est.pos_m, est.vel_m_s, shifted[2], "", None, None),
+                         shifted[2])
+        assert [e for e in out.events if e[1] is Code.CLOCK_CHANGED][0][0] is Level.WARN
+        assert _wait(lambda: session.replans == 1 and any(
+            s == pytest.approx(shifted[2]) for s, _ in out.thrust))
+        assert session.stamps.newest == shifted[2]
+    finally:
+        session.stop()
+
+
+def test_the_stamp_guard_without_a_plan_or_with_the_test_off_accepts_anything():
+    class _Plan:
+        start_times_s = np.array([0.0, 100.0])
+        end_times_s = np.array([100.0, 250.0])
+    guard = StampGuard(2.0, 2)
+    assert guard.bound_s(_Plan()) == 300.0 and guard.bound_s(None) == np.inf
+    assert StampGuard(0.0, 2).bound_s(_Plan()) == np.inf
+    assert not guard.accept(1000.0, "state_estimate", _Plan())
+    assert not guard.accept(900.0, "state_estimate", _Plan())   # older, within the bound
+    with pytest.raises(InputRejected):
+        guard.accept(5000.0, "state_estimate", _Plan())
+    with pytest.raises(InputRejected):                       # not consistent with 5000: restart
+        guard.accept(9000.0, "state_estimate", _Plan())
+    assert guard.accept(9100.0, "state_estimate", _Plan())   # two in a row agree
+    assert guard.newest == 9100.0
