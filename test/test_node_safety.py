@@ -107,3 +107,6 @@ def test_the_stamp_guard_without_a_plan_or_with_the_test_off_accepts_anything():
         guard.accept(9000.0, "state_estimate", _Plan())
     assert guard.accept(9100.0, "state_estimate", _Plan())   # two in a row agree
     assert guard.newest == 9100.0
+    with pytest.raises(InputRejected, match="-9000"):          # as far behind
+        guard.accept(100.0, "state_estimate", _Plan())
+    assert guard.newest == 9100.0

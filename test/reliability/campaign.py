@@ -35,6 +35,7 @@ T0_S = 1000.0   # the mission clock at departure [s] (daddy_sim.sim.T0_S, the de
 # delivery to a node whose solver thread is busy has been seen to exceed 0.1 s (CI, session 27)
 DELIVERY_S = ESTIMATE_WAIT_S
 MAX_SUPERSEDED = 0.05   # share of new schedules a subscriber may miss under load (latched depth 1)
+DAY_S = 86400.0
 REPLY_TIMEOUT_S = 5.0   # one bad input must be diagnosed within this
 PAUSE_STEPS = 10        # estimates the node is kept inactive for (process faults)
 
@@ -245,7 +246,8 @@ def bad_inputs(sizes: Sizes, workdir: Path) -> list[Row]:
     sc = planner.case.spacecraft
     pos, vel, mass = sim.truth_si()
     rows = {k: Row(k) for k in ("inputs: generated bad estimates", "inputs: request stamps",
-                                "inputs: truncated/empty messages", "inputs: parameter updates")}
+                                "inputs: stamp glitches", "inputs: truncated/empty messages",
+                                "inputs: parameter updates")}
 
     def session():
         client = Client()
@@ -253,6 +255,7 @@ def bad_inputs(sizes: Sizes, workdir: Path) -> list[Row]:
         try:
             _generated(client, node, rows["inputs: generated bad estimates"])
             _request_stamps(client, node, rows["inputs: request stamps"])
+            _stamp_glitches(client, node, rows["inputs: stamp glitches"])
             _truncated(client, node, rows["inputs: truncated/empty messages"])
             _parameters(client, node, rows["inputs: parameter updates"])
         finally:
@@ -316,6 +319,30 @@ def bad_inputs(sizes: Sizes, workdir: Path) -> list[Row]:
             got = client.wait_for(lambda: client.diag_for(rid, n0), REPLY_TIMEOUT_S)
             row.check(bool(got) and got[0] == 2 and expect in got[1] and no_bad_output(client, t0),
                       f"{rid}: {got}", time.time() - t0)
+
+    def _stamp_glitches(client, node, row):
+        """State estimates stamped days to years ahead of the flight between normal ones (issue
+        49; the flight starts at T0_S = 1000 s, so a stamp as far behind is negative and
+        rejected as such: the guard's backward test is test_node_safety's): each is rejected as
+        a STAMP_JUMP, gets no thrust command, and the normal estimate after it gets its own."""
+        from daddy_ros import conversions as cv
+        t = sim.t_s
+        client.send_estimate(pos, vel, mass, t)
+        for i, jump in enumerate((100 * DAY_S, 30 * DAY_S, 1000 * DAY_S, 100 * DAY_S)):
+            t0, n0 = time.time(), len(client.diags)
+            client.send_state(pos, vel, t + jump)
+            got = client.wait_for(lambda: [status(m) for _, m in client.diags[n0:]
+                                           if status(m)[2].get("code") == "STAMP_JUMP"],
+                                  REPLY_TIMEOUT_S)
+            after = client.send_estimate(pos, vel, mass, t + 60.0 * (i + 1), REPLY_TIMEOUT_S)
+            with client.cond:
+                glitch_thrust = any(abs(cv.stamp_to_s(m.header.stamp) - (t + jump)) < 1.0
+                                    for _, m in client.thrust)
+            row.check(bool(got) and got[0][0] == 2 and "header.stamp" in got[0][1] and after
+                      and not glitch_thrust and node.alive() and no_bad_output(client, t0),
+                      f"jump {jump / DAY_S:+.0f} d: {got[0][1] if got else 'no STAMP_JUMP'}; "
+                      f"next estimate answered {after}, glitch commanded {glitch_thrust}",
+                      time.time() - t0)
 
     def _truncated(client, node, row):
         """Serialised estimates cut short (the middleware drops them: no callback, so no
