@@ -21,6 +21,7 @@ from daddy_core.errors import DaddyError
 from .checks import InputRejected, StampGuard
 from .feedback import FeedbackLaws
 from .plan import Code, Level, Plan
+from .plan_fit import PlanFit
 from .planner import GuidancePlanner
 from .request_queue import RequestQueue
 from .self_trigger import Reason, ReplanTrigger
@@ -62,6 +63,8 @@ class GuidanceSession:
         self._withheld: list[float] = []   # estimate stamps whose thrust waits for a re-plan
         self._withheld_lock = threading.Lock()
         self._replan_on_first_estimate = False
+        self.fit = PlanFit(planner.case, planner.config.fit_position_m,
+                           planner.config.fit_velocity_m_s)
         self.stamps = StampGuard(planner.config.max_stamp_jump_stages,
                                  planner.config.stamp_jump_confirmations)
         self._worker = threading.Thread(target=self._work, name="daddy_replan", daemon=True)
@@ -80,9 +83,31 @@ class GuidanceSession:
         # an estimate that triggers a re-plan gets its thrust command after it (_finish)
         if plan is not None and new_clock:
             self._replan_on_new_clock(stamp)
+        elif plan is not None and not self._fits(est, stamp, plan):
+            pass   # withheld; the re-plan from this estimate answers it (_release_withheld)
         elif plan is not None and not self._self_triggered(est, stamp, plan):
             self.out.publish_thrust(plan.command_at(stamp, est.pos_m, est.vel_m_s), stamp)
         self._maybe_replan_after_restart()
+
+    def _fits(self, est: StateEstimate, stamp: float, plan: Plan) -> bool:
+        """Whether the plan fits the estimate (``plan_fit``); if not, an ERROR
+        PLAN_DOES_NOT_FIT, the estimate's thrust command withheld and a re-plan from it
+        queued: no thrust is commanded from a plan that does not fit the state."""
+        fit = self.fit.check(plan, stamp, est.pos_m, est.vel_m_s)
+        if fit.fits:
+            return True
+        self.out.diag(Level.ERROR, Code.PLAN_DOES_NOT_FIT,
+                      f"the plan in force is {fit.position_m / 1e3:.6g} km, "
+                      f"{fit.velocity_m_s:.6g} m/s from the estimate (fit_position_m, "
+                      "fit_velocity_m_s): thrust withheld, re-planning from it",
+                      {"request_id": f"fit-{stamp:.3f}",
+                       "deviation_position_m": f"{fit.position_m:.3f}",
+                       "deviation_velocity_m_s": f"{fit.velocity_m_s:.6f}"}, stamp,
+                      log_every_s=1.0)
+        with self._withheld_lock:
+            self._withheld.append(stamp)
+        self.queue.enqueue(f"fit-{stamp:.3f}", stamp)
+        return False
 
     def _replan_on_new_clock(self, stamp: float) -> None:
         """Estimates in a row set a new flight clock (``checks.StampGuard``): the plan's stage
@@ -287,7 +312,18 @@ class GuidanceSession:
                 est = self.queue.state_for(s)   # the estimate of that stamp (RTN plans turn)
             except InputRejected:
                 continue
-            self.out.publish_thrust(plan.command_at(s, est.pos_m, est.vel_m_s), s)
+            fit = self.fit.check(plan, s, est.pos_m, est.vel_m_s)
+            if fit.fits:
+                self.out.publish_thrust(plan.command_at(s, est.pos_m, est.vel_m_s), s)
+                continue
+            # the re-plan failed and the plan in force is far from the estimate: the safe value
+            self.out.publish_thrust(np.zeros(3), s)
+            self.out.diag(Level.ERROR, Code.PLAN_DOES_NOT_FIT,
+                          f"zero thrust: no plan fits the estimate (the plan in force is "
+                          f"{fit.position_m / 1e3:.6g} km, {fit.velocity_m_s:.6g} m/s from it)",
+                          {"request_id": f"fit-{s:.3f}",
+                           "deviation_position_m": f"{fit.position_m:.3f}",
+                           "deviation_velocity_m_s": f"{fit.velocity_m_s:.6f}"}, s)
 
     def stop(self) -> None:
         """Stop the worker (the solve in progress, if any, finishes first)."""

@@ -110,3 +110,53 @@ def test_the_stamp_guard_without_a_plan_or_with_the_test_off_accepts_anything():
     with pytest.raises(InputRejected, match="-9000"):          # as far behind
         guard.accept(100.0, "state_estimate", _Plan())
     assert guard.newest == 9100.0
+
+
+def test_an_estimate_the_plan_does_not_fit_gets_no_thrust_from_it_and_a_re_plan():
+    """An estimate 300 km from the plan (beyond fit_position_m = 200 km; the restarted node
+    adopting its departure nominal days into the flight is the same fault, farther): ERROR
+    PLAN_DOES_NOT_FIT naming the deviation, no thrust command from that plan; the re-plan
+    from the estimate then answers it from a plan that fits it."""
+    planner, session, out = _session()
+    plan = planner.plan
+    try:
+        est, t, m = _estimate(plan, 3, 0.0)
+        est = OdometryState(est.pos_m + np.array([300e3, 0.0, 0.0]), est.vel_m_s, t, "", None,
+                            None)
+        session.on_mass(m, t)
+        session.on_state(est, t)
+        (level, _, values), = [e for e in out.events if e[1] is Code.PLAN_DOES_NOT_FIT]
+        assert level is Level.ERROR
+        assert float(values["deviation_position_m"]) == pytest.approx(300e3, rel=1e-6)
+        assert not [s for s, _ in out.thrust if s == pytest.approx(t)]   # nothing yet
+        assert _wait(lambda: any(s == pytest.approx(t) for s, _ in out.thrust))
+        (_, thrust), = [(s, u) for s, u in out.thrust if s == pytest.approx(t)]
+        new = planner.plan
+        assert new is not plan and session.fit.check(new, t, est.pos_m, est.vel_m_s).fits
+        np.testing.assert_allclose(thrust, new.command_at(t, est.pos_m, est.vel_m_s))
+    finally:
+        session.stop()
+
+
+def test_a_failed_re_plan_leaves_zero_thrust_not_the_plan_that_does_not_fit():
+    """The plan does not fit and the re-plan from the estimate stores nothing (its solve
+    raises): the withheld command is zero thrust, with an ERROR saying so."""
+    planner, session, out = _session()
+    plan = planner.plan
+
+    def broken(*args, **kwargs):
+        raise RuntimeError("injected solver fault")
+    planner.replan = broken
+    try:
+        est, t, m = _estimate(plan, 3, 0.0)
+        est = OdometryState(est.pos_m, est.vel_m_s + np.array([0.0, 5.0, 0.0]), t, "", None,
+                            None)
+        session.on_mass(m, t)
+        session.on_state(est, t)
+        assert _wait(lambda: any(s == pytest.approx(t) for s, _ in out.thrust))
+        (_, thrust), = [(s, u) for s, u in out.thrust if s == pytest.approx(t)]
+        assert np.all(thrust == 0.0) and planner.plan is plan
+        # one at the estimate (thrust withheld), one at the release (zero thrust commanded)
+        assert [e[0] for e in out.events if e[1] is Code.PLAN_DOES_NOT_FIT] == [Level.ERROR] * 2
+    finally:
+        session.stop()
