@@ -100,7 +100,7 @@ def test_the_session_answers_a_stage_boundary_from_the_law_at_once():
     try:
         for k, dt in ((2, -60.0), (3, 0.0)):       # the prediction starts, then a boundary
             t = float(plan.start_times_s[k]) + dt
-            x = plan.states_si[k] if dt == 0.0 else plan.states_si[k - 1]
+            x = session.fit.predicted(plan, t)          # the plan's state at t
             session.on_mass(float(x[6]), t)
             session.on_state(OdometryState(x[:3] + [500.0, 0, 0], x[3:6], t, "", None, None), t)
         assert session.replans == 0 and session.laws_served == 1
