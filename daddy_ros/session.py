@@ -62,6 +62,7 @@ class GuidanceSession:
         self.replans = 0
         self._withheld: list[float] = []   # estimate stamps whose thrust waits for a re-plan
         self._withheld_lock = threading.Lock()
+        self._unanswered: list[float] = []   # estimate stamps that came before any plan
         self._replan_on_first_estimate = False
         self.fit = PlanFit(planner.case, planner.config.fit_position_m,
                            planner.config.fit_velocity_m_s)
@@ -80,14 +81,33 @@ class GuidanceSession:
         new_clock = self.stamps.accept(stamp, "state_estimate", self.planner.plan)
         self.queue.add_state(est.pos_m, est.vel_m_s, stamp, est.pos_sigma_m, est.vel_sigma_m_s)
         plan = self.planner.plan or self._adopt_nominal()
-        # an estimate that triggers a re-plan gets its thrust command after it (_finish)
-        if plan is not None and new_clock:
+        if plan is None:   # (no mass yet, or no plan at all): answered when one comes
+            with self._withheld_lock:
+                self._unanswered.append(stamp)
+        elif new_clock:
             self._replan_on_new_clock(stamp)
-        elif plan is not None and not self._fits(est, stamp, plan):
-            pass   # withheld; the re-plan from this estimate answers it (_release_withheld)
-        elif plan is not None and not self._self_triggered(est, stamp, plan):
-            self.out.publish_thrust(plan.command_at(stamp, est.pos_m, est.vel_m_s), stamp)
+        else:
+            self._answer(est, stamp, plan)
         self._maybe_replan_after_restart()
+
+    def _answer(self, est: StateEstimate, stamp: float, plan: Plan) -> None:
+        """The thrust command of an accepted estimate: at once from the plan, or withheld for
+        a re-plan (the plan does not fit it, or the re-plan policy wants one: _finish answers
+        it)."""
+        if self._fits(est, stamp, plan) and not self._self_triggered(est, stamp, plan):
+            self.out.publish_thrust(plan.command_at(stamp, est.pos_m, est.vel_m_s), stamp)
+
+    def _answer_unanswered(self, plan: Plan) -> None:
+        """The estimates that came before any plan, answered by the one now in force (mass
+        and state may arrive in either order)."""
+        with self._withheld_lock:
+            stamps, self._unanswered = self._unanswered, []
+        for s in stamps:
+            try:
+                est = self.queue.state_for(s)
+            except InputRejected:
+                continue
+            self._answer(est, s, plan)
 
     def _fits(self, est: StateEstimate, stamp: float, plan: Plan) -> bool:
         """Whether the plan fits the estimate (``plan_fit``); if not, an ERROR
@@ -124,8 +144,8 @@ class GuidanceSession:
     def on_mass(self, mass: float, stamp: float) -> None:
         self.planner.checks.check_mass(mass, stamp)
         self.queue.add_mass(stamp, mass)
-        if self.planner.plan is None:
-            self._adopt_nominal()
+        if self.planner.plan is None and self._adopt_nominal() is not None:
+            self._answer_unanswered(self.planner.plan)
         self._maybe_replan_after_restart()
 
     def request(self, request_id: str, stamp: float | None) -> str:
@@ -307,6 +327,7 @@ class GuidanceSession:
             stamps, self._withheld = self._withheld, []
         if plan is None or not self.active():
             return
+        self._answer_unanswered(plan)
         for s in stamps:
             try:
                 est = self.queue.state_for(s)   # the estimate of that stamp (RTN plans turn)

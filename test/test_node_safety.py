@@ -160,3 +160,36 @@ def test_a_failed_re_plan_leaves_zero_thrust_not_the_plan_that_does_not_fit():
         assert [e[0] for e in out.events if e[1] is Code.PLAN_DOES_NOT_FIT] == [Level.ERROR] * 2
     finally:
         session.stop()
+
+
+@pytest.mark.parametrize("state_first", [True, False])
+def test_the_first_estimate_gets_its_command_whichever_of_state_and_mass_comes_first(
+        state_first):
+    """A node starting from its nominal plan file: the first state estimate gets its thrust
+    command whether its mass came before or after it (the nominal is adopted at the first
+    complete estimate)."""
+    from daddy_ros.config import bundled_plan
+    from daddy_ros.planner import GuidancePlanner
+
+    from test_feedback_laws import CASE
+    planner = GuidancePlanner(CASE, time_budget_s=60.0)
+    out = _Outputs()
+    session = GuidanceSession(planner, ReplanTrigger.for_planner(planner, STAGES_ONLY),
+                              str(bundled_plan(CASE)), "", out, lambda: True, None)
+    from daddy_sim.sim import T0_S, Errors, TruthSim
+    pos, vel, mass = TruthSim(CASE, Errors(0, 0, 0, 0), t0_s=T0_S).truth_si()
+    est = OdometryState(pos, vel, T0_S, "", None, None)
+    try:
+        if state_first:
+            session.on_state(est, T0_S)
+            assert not out.thrust
+            session.on_mass(mass, T0_S)
+        else:
+            session.on_mass(mass, T0_S)
+            session.on_state(est, T0_S)
+        assert _wait(lambda: len(out.thrust) == 1, 10.0)
+        (stamp, thrust), = out.thrust
+        assert stamp == T0_S and planner.plan is not None
+        np.testing.assert_allclose(thrust, planner.plan.command_at(T0_S, pos, vel))
+    finally:
+        session.stop()
