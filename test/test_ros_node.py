@@ -105,8 +105,9 @@ def _body_frame_odometry(pos, vel_inertial, stamp, yaw):
 
 def test_body_frame_twist_is_rotated_into_the_header_frame(graph):
     node, c = graph
-    pos, vel, mass = truth_at_start()
     t = node.planner.plan.epoch_s + 5.0
+    x = node.session.fit.predicted(node.planner.plan, t)   # on the plan (no re-plan follows)
+    pos, vel = x[:3], x[3:6]
     msg = _body_frame_odometry(pos, vel, t, yaw=2.1)
     msg.pose.covariance = np.diag([1e6, 1e6, 1e6, 0, 0, 0]).ravel().tolist()   # sigma 1 km
     c.pub_state.publish(msg)
@@ -123,8 +124,9 @@ def test_malformed_estimates_rejected_at_arrival_and_plan_kept(graph, case):
     node, c = graph
     plan_before = node.planner.plan
     assert plan_before is not None
-    pos, vel, mass = truth_at_start()
     t = plan_before.epoch_s + 10.0
+    x = node.session.fit.predicted(plan_before, t)   # on the plan: only the fault is wrong
+    pos, vel, mass = x[:3], x[3:6], x[6]
     n0 = len(c.diags)
     expect = {"nan": "position", "frame": "frame_id", "negative_mass": "inertia.m",
               "inside_sun": "heliocentric", "unset_stamp": "header.stamp",
@@ -161,8 +163,9 @@ def test_malformed_estimates_rejected_at_arrival_and_plan_kept(graph, case):
 def test_requests_without_a_usable_estimate_are_rejected(graph, case):
     node, c = graph
     plan_before = node.planner.plan
-    pos, vel, mass = truth_at_start()
     t = plan_before.epoch_s + 10.0
+    x = node.session.fit.predicted(plan_before, t)     # an estimate on the plan
+    pos, vel, mass = x[:3], x[3:6], x[6]
     c.publish_estimate(pos, vel, mass, t)
     assert c.wait_for(lambda: [m for _, m in c.thrust
                                if cv.stamp_to_s(m.header.stamp) >= t - 1e-3], 10)
@@ -443,8 +446,10 @@ def test_node_replans_by_itself_on_drift_and_answers_the_estimate_after_it(graph
         assert c.wait_for(lambda: [m for _, m in c.thrust
                                    if abs(cv.stamp_to_s(m.header.stamp) - t1) < 1e-6], 15)
         t2 = t1 + 600.0
+        sim.apply(node.planner.plan.thrust_at(t1), 600.0)
+        p2, v2, m2 = sim.truth_si()
         n0 = len(c.diags)
-        c.publish_estimate(p1 + [2e4, 0, 0], v1, m1, t2)
+        c.publish_estimate(p2 + [2e4, 0, 0], v2, m2, t2)
         got = c.wait_for(lambda: [m for _, m in c.thrust
                                   if abs(cv.stamp_to_s(m.header.stamp) - t2) < 1e-6], 60)
         assert got, "no thrust command for the drifted estimate"
@@ -496,12 +501,13 @@ def test_an_earth_centred_scenario_is_flown_from_eci_odometry(graph, tmp_path):
         assert c.schedules, "no schedule for the Earth-centred scenario"
         msg = c.schedules[-1][1]
         assert msg.header.frame_id == "eci_rtn" and len(msg.points) == 155
-        c.publish_estimate(x[:3], x[3:6], x[6], T0 + 10.0)
+        y = node.session.fit.predicted(node.planner.plan, T0 + 10.0)   # on the plan
+        c.publish_estimate(y[:3], y[3:6], y[6], T0 + 10.0)
         assert c.wait_for(lambda: [m for _, m in c.thrust
                                    if cv.stamp_to_s(m.header.stamp) == T0 + 10.0], 10.0)
         cmd = [m for _, m in c.thrust if cv.stamp_to_s(m.header.stamp) == T0 + 10.0][-1]
         assert cmd.header.frame_id == "eci"
-        expected = models.rtn_basis(x[:3], x[3:6]) @ np.array(msg.points[0].effort)
+        expected = models.rtn_basis(y[:3], y[3:6]) @ np.array(msg.points[0].effort)
         np.testing.assert_allclose([cmd.vector.x, cmd.vector.y, cmd.vector.z], expected,
                                    rtol=1e-9, atol=1e-12)
     finally:

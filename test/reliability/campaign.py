@@ -328,7 +328,7 @@ def bad_inputs(sizes: Sizes, workdir: Path) -> list[Row]:
         from daddy_ros import conversions as cv
         t = sim.t_s
         client.send_estimate(pos, vel, mass, t)
-        for i, jump in enumerate((100 * DAY_S, 30 * DAY_S, 1000 * DAY_S, 100 * DAY_S)):
+        for i, jump in enumerate((100 * DAY_S, 200 * DAY_S, 1000 * DAY_S, 365 * DAY_S)):
             t0, n0 = time.time(), len(client.diags)
             client.send_state(pos, vel, t + jump)
             got = client.wait_for(lambda: [status(m) for _, m in client.diags[n0:]
