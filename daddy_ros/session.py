@@ -293,8 +293,13 @@ class GuidanceSession:
                            ("state_velocity_sigma_m_s", state.vel_sigma_m_s)):
             if sigma is not None:   # from the estimate's covariances, where it gave them
                 started[key] = f"{sigma:.6g}"
+        # a plan that does not fit the estimate is no warm start either (a restarted node's
+        # nominal days into the flight): solved cold from the estimate
+        plan = self.planner.plan
+        cold = plan is not None and not self.fit.check(plan, stamp, pos, vel).fits
         try:
-            out = self.planner.replan(pos, vel, mass, stamp, request_id, now_s=request_stamp)
+            out = self.planner.replan(pos, vel, mass, stamp, request_id, now_s=request_stamp,
+                                      cold=cold)
         except InputRejected as exc:
             self._finish(request_id, None, Level.ERROR, exc.code, f"input rejected: {exc}", now,
                          started)

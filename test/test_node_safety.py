@@ -196,3 +196,35 @@ def test_the_first_estimate_gets_its_command_whichever_of_state_and_mass_comes_f
         np.testing.assert_allclose(thrust, planner.plan.command_at(T0_S, pos, vel))
     finally:
         session.stop()
+
+
+def test_a_restarted_node_does_not_fly_its_departure_nominal_days_into_the_flight():
+    """Issue 49's fault: a node restarted without persist_file adopts its nominal plan file at
+    the first estimate, day 3 of the flight. That plan (anchored at the estimate's stamp, from
+    the departure state) does not fit the day-3 state: no command from it, an ERROR
+    PLAN_DOES_NOT_FIT, and the command comes from the re-plan solved from that estimate (or
+    is zero)."""
+    from daddy_ros.config import bundled_plan
+    from daddy_ros.planner import GuidancePlanner
+
+    from test_feedback_laws import CASE
+    flown = _planner().plan                        # the flight so far, on its nominal
+    k = int(np.searchsorted(flown.start_times_s, flown.start_times_s[0] + 3 * DAY_S))
+    est, t, m = _estimate(flown, k, 0.0)
+    planner = GuidancePlanner(CASE, time_budget_s=10.0)   # (the re-plan may use all of it)
+    out = _Outputs()
+    session = GuidanceSession(planner, ReplanTrigger.for_planner(planner, STAGES_ONLY),
+                              str(bundled_plan(CASE)), "", out, lambda: True, None)
+    try:
+        session.on_mass(m, t)
+        session.on_state(est, t)
+        nominal = [e for e in out.events if e[1] is Code.PLAN_DOES_NOT_FIT]
+        assert nominal and float(nominal[0][2]["deviation_position_m"]) > 1e7
+        assert _wait(lambda: any(s == t for s, _ in out.thrust), 200.0), out.events
+        (_, thrust), = [(s, u) for s, u in out.thrust if s == t]
+        plan = planner.plan
+        assert (np.all(thrust == 0.0)
+                or session.fit.check(plan, t, est.pos_m, est.vel_m_s).fits
+                and np.allclose(thrust, plan.command_at(t, est.pos_m, est.vel_m_s)))
+    finally:
+        session.stop()
