@@ -69,13 +69,13 @@ class PlannerConfig:
                                         "otherwise; 0: the full rating", bounds=(0.0, 0.99))
     staleness_s: float = option(600.0, "estimates older than this relative to the request are "
                                        "rejected [s]", runtime=True, bounds=(1e-3, 1e9))
-    fit_position_m: float = option(1e6, "thrust is commanded from a plan only for an "
+    fit_position_m: float = option(1e7, "thrust is commanded from a plan only for an "
                                           "estimate within this distance of the plan's "
                                           "predicted state at its stamp; else the command is "
                                           "withheld and the node re-plans from the estimate "
                                           "(PLAN_DOES_NOT_FIT) [m] (0: no position test)",
                                    bounds=(0.0, 1e12))
-    fit_velocity_m_s: float = option(10.0, "... and within this speed of it [m/s] (0: no "
+    fit_velocity_m_s: float = option(100.0, "... and within this speed of it [m/s] (0: no "
                                           "velocity test)", bounds=(0.0, 1e6))
     max_stamp_jump_stages: float = option(10.0, "a state estimate stamped more than this many "
                                                 "of the plan's longest stages from the newest "
