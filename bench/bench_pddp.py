@@ -88,7 +88,7 @@ def _pddp(case_name: str, sigma0, cap: float) -> tuple:
     return ok, r.final_mass_kg, time.process_time() - t
 
 
-def _shoot(case_name: str, sigma0, cap: float) -> tuple:
+def _shoot(case_name: str, sigma0) -> tuple:
     from scipy.optimize import root
     case = load_case(case_name)
     problem = costate_problem(case, 1, PDDPOptions().sharpness[0])
@@ -127,7 +127,7 @@ def robustness(case_name: str, n: int, half_width: float, seed: int, cap: float,
     t = time.perf_counter()
     with concurrent.futures.ProcessPoolExecutor(jobs) as pool:
         pddp = list(pool.map(_pddp, [case_name] * n, draws, [cap] * n))
-        shoot = list(pool.map(_shoot, [case_name] * n, draws, [cap] * n))
+        shoot = list(pool.map(_shoot, [case_name] * n, draws))
     for label, runs in (("PDDP", pddp), ("single shooting", shoot)):
         ok = [r for r in runs if r[0]]
         masses = np.array([r[1] for r in ok])

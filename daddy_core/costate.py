@@ -30,10 +30,16 @@ import numpy as np
 
 from .da import functions as dm
 from .dynamics.rhs import Dynamics
+from .errors import DaddyError
 from .integrators import rk78
 from .problem import FlowStep, Problem, StageStep
 
 PRIMER_FLOOR = 1e-12
+
+
+def switching(lv, lm, m, c: float):
+    """The switching function S = |lambda_v| c / m + lambda_m - 1 (S > 0 burns)."""
+    return lv * c / m + lm - 1.0
 
 
 def primer_law(lvx, lvy, lvz, lm, m, c: float, u_max: float, rho: float):
@@ -41,8 +47,7 @@ def primer_law(lvx, lvy, lvz, lm, m, c: float, u_max: float, rho: float):
     magnitude for the costates lambda_v, lambda_m at mass m (module docstring); the thrust
     points along -lambda_v."""
     lv = dm.sqrt(lvx * lvx + lvy * lvy + lvz * lvz + PRIMER_FLOOR ** 2)
-    switch = lv * c / m + lm - 1.0
-    return (dm.tanh(switch * (1.0 / rho)) + 1.0) * (0.5 * u_max), lv
+    return (dm.tanh(switching(lv, lm, m, c) * (1.0 / rho)) + 1.0) * (0.5 * u_max), lv
 
 
 def cr3bp_costate(mu: float, exhaust_speed: float, u_max: float, rho: float) -> Dynamics:
@@ -138,7 +143,6 @@ class CostateStep(StageStep):
         return np.asarray(self.flow14.flow(np.concatenate([x, lam]), lam, dt, t0))[:7]
 
 
-
 def costate_problem(case, stages: int, rho: float):
     """The catalogue CR3BP ``case`` with ``stages`` costate-controlled stages of equal length
     at throttle sharpness ``rho``: controls sigma_k (7, ``costate_scale``), cost m_0 - m_N (the
@@ -146,7 +150,7 @@ def costate_problem(case, stages: int, rho: float):
     position and velocity on the target (``Problem.g_teq``)."""
     units = case.units
     if case.system != "earth_moon_cr3bp":
-        raise ValueError(f"costate stages are built for the Earth-Moon CR3BP, not "
+        raise DaddyError(f"costate stages are built for the Earth-Moon CR3BP, not "
                          f"{case.system!r}")
     c = case.spacecraft.exhaust_speed(units)
     u_max = float(units.thrust(case.spacecraft.max_thrust_n))

@@ -27,7 +27,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from .catalogue import problem_from_case
-from .costate import costate_problem, thrust_schedule
+from .costate import costate_problem, switching, thrust_schedule
 from .errors import DaddyError
 from .integrators import rk78
 from .solver import Globalization, Method, Solution, SolverOptions, case_options, solve
@@ -136,7 +136,7 @@ def switching_function(problem, sigma, samples: int = 200):
             if i:
                 z = rk78(step.flow14.rhs, z, None, t + (i - 1) * h, h, tol=1e-12)
             ts.append(t + i * h)
-            S.append(np.linalg.norm(z[10:13]) * c / z[6] + z[13] - 1.0)
+            S.append(switching(np.linalg.norm(z[10:13]), z[13], z[6], c))
         x, t = z[:7], t + dt
     return np.array(ts), np.array(S)
 

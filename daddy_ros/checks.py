@@ -127,7 +127,7 @@ class StampGuard:
     def bound_s(self, plan) -> float:
         if plan is None or not self.stages:
             return math.inf
-        return self.stages * float(np.max(plan.end_times_s - plan.start_times_s))
+        return self.stages * float(np.max(plan.stage_dt_s))
 
     def accept(self, stamp_s: float, topic: str, plan) -> bool:
         """Raise InputRejected (code STAMP_JUMP) for a jump not yet confirmed; True when this

@@ -23,6 +23,12 @@ class Fit:
     position_m: float
     velocity_m_s: float
 
+    def values(self, stamp_s: float) -> dict:
+        """The PLAN_DOES_NOT_FIT diagnostic's values for the estimate of ``stamp_s``."""
+        return {"request_id": f"fit-{stamp_s:.3f}",
+                "deviation_position_m": f"{self.position_m:.3f}",
+                "deviation_velocity_m_s": f"{self.velocity_m_s:.6f}"}
+
 
 class PlanFit:
     """The test ``fit_position_m`` / ``fit_velocity_m_s`` of one scenario (0: no test)."""

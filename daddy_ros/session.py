@@ -120,14 +120,16 @@ class GuidanceSession:
                       f"the plan in force is {fit.position_m / 1e3:.6g} km, "
                       f"{fit.velocity_m_s:.6g} m/s from the estimate (fit_position_m, "
                       "fit_velocity_m_s): thrust withheld, re-planning from it",
-                      {"request_id": f"fit-{stamp:.3f}",
-                       "deviation_position_m": f"{fit.position_m:.3f}",
-                       "deviation_velocity_m_s": f"{fit.velocity_m_s:.6f}"}, stamp,
-                      log_every_s=1.0)
+                      fit.values(stamp), stamp, log_every_s=1.0)
+        self._withhold_for_replan(f"fit-{stamp:.3f}", stamp)
+        return False
+
+    def _withhold_for_replan(self, request_id: str, stamp: float) -> None:
+        """Queue a re-plan from the estimate of ``stamp``; its thrust command waits for it
+        (``_release_withheld``)."""
         with self._withheld_lock:
             self._withheld.append(stamp)
-        self.queue.enqueue(f"fit-{stamp:.3f}", stamp)
-        return False
+        self.queue.enqueue(request_id, stamp)
 
     def _replan_on_new_clock(self, stamp: float) -> None:
         """Estimates in a row set a new flight clock (``checks.StampGuard``): the plan's stage
@@ -137,9 +139,7 @@ class GuidanceSession:
                       f"{self.stamps.confirmations} state estimates in a row set a new flight "
                       f"clock ({stamp:.3f} s): re-planning from the last",
                       {"request_id": f"clock-{stamp:.3f}"}, stamp)
-        with self._withheld_lock:
-            self._withheld.append(stamp)
-        self.queue.enqueue(f"clock-{stamp:.3f}", stamp)
+        self._withhold_for_replan(f"clock-{stamp:.3f}", stamp)
 
     def on_mass(self, mass: float, stamp: float) -> None:
         self.planner.checks.check_mass(mass, stamp)
@@ -173,9 +173,7 @@ class GuidanceSession:
             return False
         if reason is Reason.STAGE and self._fly_law(est, stamp, mass, plan):
             return False
-        with self._withheld_lock:
-            self._withheld.append(stamp)
-        self.queue.enqueue(f"self-{reason}-{stamp:.3f}", stamp)
+        self._withhold_for_replan(f"self-{reason}-{stamp:.3f}", stamp)
         return True
 
     def _fly_law(self, est: StateEstimate, stamp: float, mass: float, plan: Plan) -> bool:
@@ -347,9 +345,7 @@ class GuidanceSession:
             self.out.diag(Level.ERROR, Code.PLAN_DOES_NOT_FIT,
                           f"zero thrust: no plan fits the estimate (the plan in force is "
                           f"{fit.position_m / 1e3:.6g} km, {fit.velocity_m_s:.6g} m/s from it)",
-                          {"request_id": f"fit-{s:.3f}",
-                           "deviation_position_m": f"{fit.position_m:.3f}",
-                           "deviation_velocity_m_s": f"{fit.velocity_m_s:.6f}"}, s)
+                          fit.values(s), s)
 
     def stop(self) -> None:
         """Stop the worker (the solve in progress, if any, finishes first)."""

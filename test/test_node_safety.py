@@ -97,8 +97,7 @@ def test_consistent_estimates_in_a_row_set_a_new_clock_and_the_node_re_plans():
 
 def test_the_stamp_guard_without_a_plan_or_with_the_test_off_accepts_anything():
     class _Plan:
-        start_times_s = np.array([0.0, 100.0])
-        end_times_s = np.array([100.0, 250.0])
+        stage_dt_s = np.array([100.0, 150.0])
     guard = StampGuard(2.0, 2)
     assert guard.bound_s(_Plan()) == 300.0 and guard.bound_s(None) == np.inf
     assert StampGuard(0.0, 2).bound_s(_Plan()) == np.inf
