@@ -791,6 +791,87 @@ def process_faults(sizes: Sizes, workdir: Path, progress=None) -> list[Row]:
     return [row]
 
 
+# a plan published just before a command from it may reach the client's callbacks just after
+# it (seen: 0.9 ms); a re-plan that could replace it takes seconds
+PLAN_ORDER_S = 0.1
+
+
+def restart_without_plan(sizes: Sizes, workdir: Path) -> list[Row]:
+    """Issue 49's restart fault over ROS: the node started as after a kill -9 without
+    persist_file, its first estimates mid-transfer (stage boundaries of the nominal, from the
+    third on). The node adopts its nominal anchored at the first estimate's stamp -- a plan that
+    does not fit that state. Every thrust command is judged against the newest planned_path
+    received before it: a non-zero command for an estimate farther than the fit tolerance
+    (``fit_position_m``) from that path's pose at the estimate's stamp is thrust from a plan
+    that does not fit the state, counted and required to be 0; a command with no pose at its
+    stamp cannot be judged and fails the row too. The node must also say PLAN_DOES_NOT_FIT and,
+    after its re-plan from the estimate, command thrust again."""
+    from daddy_ros import conversions as cv
+    from daddy_ros import interface as io
+    from daddy_ros.config import PlannerConfig
+
+    planner, _, _ = _nominal()
+    plan = planner.plan
+    tol_m = PlannerConfig().fit_position_m
+    row = Row("process: restart without persist_file")
+    first = 2
+    picks = range(first, min(first + 1 + sizes.kills * 2, len(plan.start_times_s) - 1))
+
+    def session():
+        c = Client()
+        paths = []
+        c.node.create_subscription(io.PATH.msg_type, io.PATH.default,
+                                   lambda m: c._add(paths, m), io.PATH.qos)
+        node = NodeProcess(workdir).start()
+        try:
+            if not c.connected(30.0):
+                raise RuntimeError("guidance node not discovered on loopback")
+            for k in picks:
+                x, t = plan.states_si[k], float(plan.start_times_s[k])
+                got = lambda: any(abs(cv.stamp_to_s(m.header.stamp) - t) < 1e-6  # noqa: E731
+                                  for _, m in c.thrust)
+                end = time.monotonic() + 240.0
+                while not got() and time.monotonic() < end:
+                    c.publish_estimate(x[:3], x[3:6], float(x[6]), t)
+                    c.wait_for(got, 2.0)
+                row.check(got(), f"no thrust command for the estimate at stage {k}")
+            with c.cond:
+                thrust, path_msgs, diags = list(c.thrust), list(paths), list(c.diags)
+            codes = {status(m)[2].get("code") for _, m in diags if m.status}
+            row.check("PLAN_DOES_NOT_FIT" in codes,
+                      f"no PLAN_DOES_NOT_FIT diagnostic (codes {sorted(c for c in codes if c)})")
+            unfit, unjudged, nonzero = [], [], 0
+            for when, m in thrust:
+                u = np.array([m.vector.x, m.vector.y, m.vector.z])
+                if not np.any(u):
+                    continue
+                nonzero += 1
+                t = cv.stamp_to_s(m.header.stamp)
+                k = int(np.argmin(np.abs(plan.start_times_s - t)))
+                before = [p for w, p in path_msgs if w <= when + PLAN_ORDER_S]
+                poses = before[-1].poses if before else []
+                at = [p for p in poses if abs(cv.stamp_to_s(p.header.stamp) - t) < 1e-3]
+                if not at:
+                    unjudged.append(t)
+                    continue
+                q = at[0].pose.position
+                if np.linalg.norm(np.array([q.x, q.y, q.z]) - plan.states_si[k, :3]) > tol_m:
+                    unfit.append(t)
+            row.check(not unfit, f"{len(unfit)} thrust commands from a plan that does not fit "
+                                 f"the state (stamps {unfit[:3]})")
+            row.check(not unjudged, f"{len(unjudged)} thrust commands with no planned pose at "
+                                    f"their stamp (stamps {unjudged[:3]})")
+            row.check(nonzero > 0, "no thrust commanded after the re-plan from the estimate")
+            row.failures.append(f"(info) {nonzero} thrust commands judged, thrust from a plan "
+                                f"that does not fit the state: {len(unfit)}")
+        finally:
+            node.stop()
+            c.close()
+
+    _ros_session(session)
+    return [row]
+
+
 # ---------------------------------------------------------------------------- core API fuzz
 def core_api(sizes: Sizes, workdir: Path) -> list[Row]:
     """Fuzz Problem construction and solve() arguments: every bad call raises DaddyError naming
@@ -880,7 +961,7 @@ def core_api(sizes: Sizes, workdir: Path) -> list[Row]:
 
 
 CATEGORIES = {"inputs": bad_inputs, "load": load, "solver": solver_faults,
-              "process": process_faults, "core": core_api}
+              "process": process_faults, "restart": restart_without_plan, "core": core_api}
 
 
 def format_table(rows: list[Row]) -> str:
