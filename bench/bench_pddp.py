@@ -11,14 +11,16 @@ one after the other in this process: final masses, switches, CPU, and the ratio 
 
 ``robustness``: ``--guesses`` random initial costates sigma_0 (7, scaled: ``costate_scale``)
 drawn uniformly in [-h, h]^7 (h = ``--half-width``), each given to
-- PDDP at rho = 1: the guess is the costates sigma_0 flown continuously through the stages
-  (each stage starts from the costates the previous one ended with), so both methods start
-  from the same trajectory;
+- PDDP (default options: its rho continuation, 3 then 1): the guess is the costates sigma_0
+  flown continuously through the stages (each stage starts from the costates the previous one
+  ended with), so both methods start from the same trajectory; ``--cap`` bounds its whole
+  continuation (wall clock);
 - single shooting: scipy.optimize.root (MINPACK hybrd) on the 7 unknowns sigma_0 of one stage
-  spanning the flight, at the same rho, the residual [r(tf) - r_t, v(tf) - v_t, lambda_m(tf)]
-  (the transversality of the free final mass), its Jacobian from the DA flow (first order).
-Success: PDDP converged with max violation <= 1e-9; shooting: MINPACK's success with the
-residual <= 1e-9. Masses of the successes are printed, and the ratio of success rates.
+  spanning the flight, through the same rho continuation (each rho's root from the last), the
+  residual [r(tf) - r_t, v(tf) - v_t, lambda_m(tf)] (the transversality of the free final
+  mass), its Jacobian from the DA flow (first order).
+Success: converged at the last rho -- PDDP with max violation <= 1e-9; shooting: MINPACK's
+success with the residual <= 1e-9. Masses of the successes are printed, and the ratio of success rates.
 """
 from __future__ import annotations
 
@@ -84,14 +86,26 @@ def _pddp(case_name: str, sigma0, cap: float) -> tuple:
     opts = PDDPOptions(solver=o.solver.with_(run=dict(time_budget_s=cap)))
     t = time.process_time()
     r = solve_pddp(case, guess, opts)
-    ok = r.solution.converged and r.solution.max_violation <= SUCCESS_VIOLATION
+    ok = (r.solution.converged and r.solution.max_violation <= SUCCESS_VIOLATION
+          and r.rho == o.sharpness[-1])
     return ok, r.final_mass_kg, time.process_time() - t
 
 
 def _shoot(case_name: str, sigma0) -> tuple:
-    from scipy.optimize import root
+    """Single shooting through PDDP's continuation: each rho's root from the last one's."""
     case = load_case(case_name)
-    problem = costate_problem(case, 1, PDDPOptions().sharpness[0])
+    t = time.process_time()
+    s, ok, mass = np.asarray(sigma0, float), False, float("nan")
+    for rho in PDDPOptions().sharpness:
+        ok, mass, s = _shoot_at(case, rho, s)
+        if not ok:
+            break
+    return ok, mass, time.process_time() - t
+
+
+def _shoot_at(case, rho: float, sigma0) -> tuple:
+    from scipy.optimize import root
+    problem = costate_problem(case, 1, rho)
     step, x0, T = problem.step, problem.x0, float(problem.stage_dt[0])
     target = problem.x_target[:6]
 
@@ -108,16 +122,14 @@ def _shoot(case_name: str, sigma0) -> tuple:
         J = Z.linear()[:, 0, :]
         return np.r_[J[:6], J[13:14]]
 
-    t = time.process_time()
     try:
         sol = root(lambda s: residual(s)[0], np.asarray(sigma0, float), jac=jacobian,
                    method="hybr", options=dict(maxfev=200))
         res, z = residual(sol.x)
         ok = bool(sol.success) and float(np.max(np.abs(res))) <= SUCCESS_VIOLATION
-        mass = float(z[6] * case.spacecraft.wet_mass_kg)
+        return ok, float(z[6] * case.spacecraft.wet_mass_kg), sol.x
     except (DaddyError, ArithmeticError, ValueError):   # a flow that blew up
-        ok, mass = False, float("nan")
-    return ok, mass, time.process_time() - t
+        return False, float("nan"), sigma0
 
 
 def robustness(case_name: str, n: int, half_width: float, seed: int, cap: float,
@@ -141,7 +153,7 @@ def robustness(case_name: str, n: int, half_width: float, seed: int, cap: float,
     print(f"both {both}, PDDP alone {n_pddp - both}, shooting alone {n_shoot - both}; "
           f"ratio PDDP / shooting {n_pddp / max(n_shoot, 1):.2f}")
     print(f"guesses sigma_0 ~ U[-{half_width:g}, {half_width:g}]^7 (seed {seed}), rho "
-          f"{PDDPOptions().sharpness[0]:g}, {PDDPOptions().stages} costate stages, PDDP cap "
+          f"{PDDPOptions().sharpness}, {PDDPOptions().stages} costate stages, PDDP cap "
           f"{cap:g} s; machine {platform.processor() or platform.machine()}, "
           f"{os.cpu_count()} cores, {jobs} jobs; {time.perf_counter() - t:.0f} s wall")
 

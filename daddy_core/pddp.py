@@ -101,17 +101,26 @@ def solve_pddp(case, guess=None, options: PDDPOptions | None = None,
     """PDDP on the catalogue CR3BP ``case``: the costate problem (``costate.costate_problem``)
     solved at each rho of ``options.sharpness`` in turn, each step warm-started from the last;
     guess: (stages, 7) sigma (None: ``default_guess``). The result is the last step that
-    converged (or the first step's answer, ``converged=False``, when none did)."""
+    converged (or the first step's answer, ``converged=False``, when none did).
+    ``options.solver.run.time_budget_s`` bounds the whole continuation: each step gets what
+    the earlier ones left, and none starts once it is spent."""
     o = options or PDDPOptions()
     sigma = default_guess(case, o.stages) if guess is None else np.asarray(guess, float)
     if sigma.shape != (o.stages, 7):
         raise DaddyError(f"guess: expected ({o.stages}, 7) scaled costates, got {sigma.shape}")
-    t0 = time.process_time()
+    t0, wall0 = time.process_time(), time.perf_counter()
+    budget = o.solver.run.time_budget_s
     steps, best = [], None
     for rho in o.sharpness:
         problem = costate_problem(case, o.stages, rho)
+        opts = o.solver   # the time budget is the whole continuation's
+        if budget is not None and best is not None:
+            left = budget - (time.perf_counter() - wall0)
+            if left <= 0.0:
+                break
+            opts = opts.with_(run=dict(time_budget_s=left))
         sol = solve(problem, sigma, method=Method.HESSDYN, fuel_optimal=False,
-                    options=o.solver, case_name=case.name, progress=progress)
+                    options=opts, case_name=case.name, progress=progress)
         steps.append((rho, sol.converged, float(sol.final_mass_kg)))
         if not sol.converged:
             break
