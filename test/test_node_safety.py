@@ -9,7 +9,7 @@ import pytest
 from daddy_ros.checks import InputRejected, StampGuard
 from daddy_ros.config import TriggerConfig
 from daddy_ros.conversions import OdometryState
-from daddy_ros.plan import Code, Level
+from daddy_ros.plan import Code, Level, ReplanOutcome
 from daddy_ros.self_trigger import ReplanTrigger
 from daddy_ros.session import GuidanceSession
 
@@ -225,5 +225,38 @@ def test_a_restarted_node_does_not_fly_its_departure_nominal_days_into_the_fligh
         assert (np.all(thrust == 0.0)
                 or session.fit.check(plan, t, est.pos_m, est.vel_m_s).fits
                 and np.allclose(thrust, plan.command_at(t, est.pos_m, est.vel_m_s)))
+    finally:
+        session.stop()
+
+
+def test_a_cold_re_plan_that_fails_falls_back_to_the_warm_start_and_its_plan_fits():
+    """The cold re-plan from an estimate the plan does not fit runs out of its budget (a loaded
+    machine): the session re-plans warm from the plan in force, and the withheld command comes
+    from that plan, which fits the estimate (not zero thrust, not the old plan)."""
+    planner, session, out = _session()
+    plan = planner.plan
+    calls, replan = [], planner.replan
+
+    def cold_starved(*args, cold=False, **kwargs):
+        calls.append(cold)
+        if not cold:
+            return replan(*args, cold=False, **kwargs)
+        # the cold solve's failure as the planner reports one (nothing stored)
+        return ReplanOutcome(False, Level.ERROR, "time budget exceeded (injected)",
+                             kwargs.get("request_id", ""), 60.0, None)
+    planner.replan = cold_starved
+    try:
+        est, t, m = _estimate(plan, 3, 0.0)
+        est = OdometryState(est.pos_m + np.array([20000e3, 0.0, 0.0]), est.vel_m_s, t, "", None,
+                            None)
+        session.on_mass(m, t)
+        session.on_state(est, t)
+        assert _wait(lambda: any(s == pytest.approx(t) for s, _ in out.thrust))
+        assert calls[:2] == [True, False]
+        (_, thrust), = [(s, u) for s, u in out.thrust if s == pytest.approx(t)]
+        new = planner.plan
+        assert new is not plan and session.fit.check(new, t, est.pos_m, est.vel_m_s).fits
+        np.testing.assert_allclose(thrust, new.command_at(t, est.pos_m, est.vel_m_s))
+        assert np.any(thrust != 0.0) or np.all(new.command_at(t, est.pos_m, est.vel_m_s) == 0.0)
     finally:
         session.stop()
