@@ -11,7 +11,7 @@ one after the other in this process: final masses, switches, CPU, and the ratio 
 
 ``robustness``: ``--guesses`` random initial costates sigma_0 (7, scaled: ``costate_scale``)
 drawn uniformly in [-h, h]^7 (h = ``--half-width``), each given to
-- PDDP (default options: its rho continuation, 3 then 1): the guess is the costates sigma_0
+- PDDP (default options, its rho continuation included): the guess is the costates sigma_0
   flown continuously through the stages (each stage starts from the costates the previous one
   ended with), so both methods start from the same trajectory; ``--cap`` bounds its whole
   continuation (wall clock);
@@ -20,7 +20,8 @@ drawn uniformly in [-h, h]^7 (h = ``--half-width``), each given to
   residual [r(tf) - r_t, v(tf) - v_t, lambda_m(tf)] (the transversality of the free final
   mass), its Jacobian from the DA flow (first order).
 Success: converged at the last rho -- PDDP with max violation <= 1e-9; shooting: MINPACK's
-success with the residual <= 1e-9. Masses of the successes are printed, and the ratio of success rates.
+success with the residual <= 1e-9. Masses of the successes are printed, and the ratio of
+success rates.
 """
 from __future__ import annotations
 

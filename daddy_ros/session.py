@@ -301,7 +301,7 @@ class GuidanceSession:
             if cold and not out.ok:
                 # the cold start's fallback: the warm start from the plan in force (a plan
                 # solved from the estimate fits it, whichever start found it), where the cold
-                # solve ran out of budget (docs/design-notes.md: cold re-plan, warm fallback)
+                # solve failed (docs/design-notes.md: cold re-plan, warm fallback)
                 out = self.planner.replan(pos, vel, mass, stamp, request_id,
                                           now_s=request_stamp, cold=False)
         except InputRejected as exc:

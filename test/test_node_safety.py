@@ -28,6 +28,17 @@ def _estimate(plan, k: int, dt: float):
     return OdometryState(x[:3], x[3:6], t, "", None, None), t, float(x[6])
 
 
+def _send_off_plan(session, plan, offset_m: float):
+    """Mass, then state, of an estimate ``offset_m`` (along x) from the plan's stage-3 start:
+    (the estimate, its stamp)."""
+    est, t, m = _estimate(plan, 3, 0.0)
+    est = OdometryState(est.pos_m + np.array([offset_m, 0.0, 0.0]), est.vel_m_s, t, "", None,
+                        None)
+    session.on_mass(m, t)
+    session.on_state(est, t)
+    return est, t
+
+
 def _session(config=STAGES_ONLY, **planner_config):
     from dataclasses import replace
     planner = _planner()
@@ -122,11 +133,7 @@ def test_an_estimate_the_plan_does_not_fit_gets_no_thrust_from_it_and_a_re_plan(
     planner, session, out = _session()
     plan = planner.plan
     try:
-        est, t, m = _estimate(plan, 3, 0.0)
-        est = OdometryState(est.pos_m + np.array([20000e3, 0.0, 0.0]), est.vel_m_s, t, "", None,
-                            None)
-        session.on_mass(m, t)
-        session.on_state(est, t)
+        est, t = _send_off_plan(session, plan, 20000e3)
         (level, _, values), = [e for e in out.events if e[1] is Code.PLAN_DOES_NOT_FIT]
         assert level is Level.ERROR
         assert float(values["deviation_position_m"]) == pytest.approx(20000e3, rel=1e-6)
@@ -246,11 +253,7 @@ def test_a_cold_re_plan_that_fails_falls_back_to_the_warm_start_and_its_plan_fit
                              kwargs.get("request_id", ""), 60.0, None)
     planner.replan = cold_starved
     try:
-        est, t, m = _estimate(plan, 3, 0.0)
-        est = OdometryState(est.pos_m + np.array([20000e3, 0.0, 0.0]), est.vel_m_s, t, "", None,
-                            None)
-        session.on_mass(m, t)
-        session.on_state(est, t)
+        est, t = _send_off_plan(session, plan, 20000e3)
         assert _wait(lambda: any(s == pytest.approx(t) for s, _ in out.thrust))
         assert calls[:2] == [True, False]
         (_, thrust), = [(s, u) for s, u in out.thrust if s == pytest.approx(t)]

@@ -801,7 +801,8 @@ def restart_without_plan(sizes: Sizes, workdir: Path) -> list[Row]:
     persist_file, its first estimates mid-transfer (stage boundaries of the nominal, from the
     third on). The node adopts its nominal anchored at the first estimate's stamp -- a plan that
     does not fit that state. Every thrust command is judged against the newest planned_path
-    received before it: a non-zero command for an estimate farther than the fit tolerance
+    received by then (``PLAN_ORDER_S`` after it: the node publishes a plan before it commands
+    from it, but the client's executor takes the two topics in either order): a non-zero command for an estimate farther than the fit tolerance
     (``fit_position_m``) from that path's pose at the estimate's stamp is thrust from a plan
     that does not fit the state, counted and required to be 0; a command with no pose at its
     stamp cannot be judged and fails the row too. The node must also say PLAN_DOES_NOT_FIT and,
