@@ -12,6 +12,7 @@ STAMP := $(VENV)/.bootstrapped
 PLOTS := $(VENV)/.plots
 RECORD := $(VENV)/.record
 CAMPAIGNS := $(VENV)/.campaigns
+INTERFACES := $(VENV)/.interfaces
 PIP := $(PY) -m pip install --disable-pip-version-check -q -c requirements/pins.txt
 
 # Every rclpy process: discovery on loopback only, a per-run domain, logs in a temp dir.
@@ -22,9 +23,11 @@ export ROS_DOMAIN_ID ?= $(shell echo $$(( $$$$ % 101 + 1 )))
 export ROS_LOG_DIR ?= $(shell mktemp -d /tmp/daddy-roslog.XXXXXX)
 export ROS_PYTHON_CHECK_FIELDS := 1
 
-.PHONY: demo test test-slow bench monte-carlo reliability robustness venv clean
+.PHONY: interfaces demo test test-slow bench monte-carlo reliability robustness venv clean
 
 venv: $(STAMP)
+
+interfaces: $(INTERFACES)
 
 $(STAMP): requirements/pins.txt requirements/core.txt requirements/ros.txt setup.py setup.cfg package.xml
 	@set -e; \
@@ -39,6 +42,14 @@ $(STAMP): requirements/pins.txt requirements/core.txt requirements/ros.txt setup
 	fi; \
 	$(PY) -m pip install --disable-pip-version-check -q --no-deps -e .; \
 	touch $@
+
+# The node's own interfaces (daddy_interfaces: the Replan action), generated with the rosidl
+# tools: a system ROS 2's (sourced), or the registry's wheels (requirements/interfaces.txt).
+# Without them the node runs without its action (it says so) and the action tests skip.
+$(INTERFACES): $(STAMP) requirements/interfaces.txt interfaces/build.py $(wildcard interfaces/daddy_interfaces/*) $(wildcard interfaces/daddy_interfaces/action/*)
+	@([ -n "$$AMENT_PREFIX_PATH" ] || $(PIP) -r requirements/interfaces.txt) && \
+	  $(PY) interfaces/build.py && touch $@ || \
+	  echo "interfaces: daddy_interfaces could not be built; the node will offer no Replan action"
 
 # The plots extra (matplotlib): the demo's figure; the tests check it. Without it (e.g. an offline
 # machine) everything runs and the demo says it skipped its plot.
@@ -58,10 +69,10 @@ $(CAMPAIGNS): $(STAMP) requirements/campaigns.txt
 	  echo "campaigns: dask could not be installed; --executor dask will say so"
 
 DEMO_CASE ?= halo_l2_l1
-demo: $(STAMP) $(PLOTS)
+demo: $(STAMP) $(PLOTS) $(INTERFACES)
 	$(VENV)/bin/gnc_demo --case $(DEMO_CASE)
 
-test: $(STAMP) $(PLOTS) $(RECORD) $(CAMPAIGNS)
+test: $(STAMP) $(PLOTS) $(RECORD) $(CAMPAIGNS) $(INTERFACES)
 	$(PY) -m pytest -q test
 
 test-slow: $(STAMP)

@@ -112,6 +112,11 @@ def state_to_odometry(pos_m, vel_m_s, stamp_s: float, frame_id: str) -> Odometry
     return msg
 
 
+def schedule_frame(plan: Plan, frame_id: str) -> str:
+    """The frame a plan's schedule is given in: the node's, or its RTN axes ("<frame>_rtn")."""
+    return f"{frame_id}_rtn" if plan.thrust_rtn else frame_id
+
+
 def plan_to_joint_trajectory(plan: Plan, frame_id: str, from_s: float | None = None) -> JointTrajectory:
     """One point per remaining stage: thrust [N] in ``effort``, stage start in
     ``time_from_start`` relative to ``header.stamp`` (= the plan epoch, or ``from_s``)."""

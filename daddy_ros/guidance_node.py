@@ -7,13 +7,13 @@ through ``diagnostics``. See msg_docs/ for the interface contract.
 from __future__ import annotations
 
 import math
+import time
 
 import numpy as np
 from geometry_msgs.msg import InertiaStamped
 from nav_msgs.msg import Odometry
 from rclpy.callback_groups import MutuallyExclusiveCallbackGroup, ReentrantCallbackGroup
 from rclpy.lifecycle import LifecycleNode, State, TransitionCallbackReturn
-from rclpy.node import Node
 from rclpy.subscription import Subscription
 from std_msgs.msg import Header
 from std_srvs.srv import Trigger
@@ -23,6 +23,7 @@ from daddy_core.errors import DaddyError
 from . import conversions as cv
 from . import interface as io
 from . import parameters
+from . import replan_action
 from .checks import InputRejected
 from .config import NodeConfig, PlannerConfig, TriggerConfig, bundled_plan
 from .diagnostics import DiagnosticsReporter
@@ -30,8 +31,8 @@ from .plan import Code, Level, Plan
 from .planner import GuidancePlanner
 from .feedback import FeedbackLaws
 from .self_trigger import ReplanTrigger
-from .session import GuidanceSession
-from .spin import run_node
+from .session import GuidanceSession, SolveReport
+from .spin import pause, run_node
 
 NODE_NAME = io.NODE_NAME
 
@@ -41,25 +42,25 @@ class GuidanceNode(LifecycleNode):
 
     - unconfigured: parameters declared (every one settable); nothing subscribed.
     - configure: the scenario loaded and checked, the planner and its session built,
-      subscriptions and the Trigger service created, a persisted plan restored. A bad parameter
+      subscriptions, the Trigger service and the Replan action (``replan_action``: where the
+      daddy_interfaces package is built) created, a persisted plan restored. A bad parameter
       fails the transition with an ERROR diagnostic naming it (the node stays unconfigured).
     - activate: estimates and requests are served, re-plans run, ``thrust_command`` is published.
     - deactivate: no thrust commands and no re-plans; estimates and requests are dropped
       (requests with an ERROR diagnostic); the last plan stays latched on its topics.
-    - cleanup / shutdown: the worker stopped, subscriptions and service destroyed.
+    - cleanup / shutdown: the worker stopped, subscriptions, service and action destroyed;
+      after shutdown (finalized) ``when_finalized`` is called (``spin.run_node``: the process
+      exits).
 
     ``autostart`` (default true) configures and activates in the constructor, so a plain start
     behaves as before; a failed configuration then raises DaddyError.
     """
 
-    def __init__(self, separate_service_node: bool = False, namespace: str | None = None,
-                 **overrides):
-        """``separate_service_node``: host the blocking Trigger service on a helper node
-        ``daddy_guidance_service`` in this node's namespace, to be spun on its own executor
-        (``main`` does this; ``self.service_node``); False hosts it here in a reentrant callback
-        group, which needs a multi-threaded executor. ``namespace``: in-process instances side
-        by side (a command line sets it with ``-r __ns:=/sc1``); ``overrides``: parameter
-        defaults."""
+    def __init__(self, namespace: str | None = None, **overrides):
+        """``namespace``: in-process instances side by side (a command line sets it with
+        ``-r __ns:=/sc1``); ``overrides``: parameter defaults. One node: the service and the
+        action wait for the worker in coroutine callbacks, so a single-threaded executor
+        serves everything."""
         super().__init__(NODE_NAME, namespace=namespace)
         try:
             parameters.declare(self, overrides)
@@ -67,15 +68,14 @@ class GuidanceNode(LifecycleNode):
             self.destroy_node()
             raise
         self.add_on_set_parameters_callback(self._on_set_parameters)
-        self.service_node = Node(f"{NODE_NAME}_service", namespace=self.get_namespace(),
-                                 use_global_arguments=False, start_parameter_services=False,
-                                 enable_rosout=False) if separate_service_node else None
+        self.when_finalized = None   # called after the shutdown transition (``spin.run_node``)
         self.fqn = self.get_fully_qualified_name()
         self.planner: GuidancePlanner | None = None
         self.session: GuidanceSession | None = None
         self.frame_id = self._param("frame_id")
         self._active = False
-        self._entities: list = []   # (owner node, subscription or service) made at configure
+        self._entities: list = []   # subscriptions and the service made at configure
+        self.action: replan_action.ReplanActionServer | None = None
         self._configure_error = ""
         # outputs exist in every state: diagnostics always, the plan latched across deactivation,
         # thrust commands only while active (a lifecycle publisher)
@@ -146,17 +146,23 @@ class GuidanceNode(LifecycleNode):
                                        cfg.plan_file or self._bundled_plan(), cfg.persist_file,
                                        self, lambda: self._active,
                                        FeedbackLaws.for_planner(self.planner, policy))
-        estimates, owner = MutuallyExclusiveCallbackGroup(), self.service_node or self
+        estimates = MutuallyExclusiveCallbackGroup()
         # requests in their own group: a request flood must not delay the estimates
         inputs = ((io.STATE, self._on_state, estimates), (io.MASS, self._on_mass, estimates),
                   (io.REQUEST, self._on_request, MutuallyExclusiveCallbackGroup()))
         self._entities = [
-            *((self, self.create_subscription(t.msg_type, self._topic_name(t), callback, t.qos,
-                                              callback_group=group))
+            *(self.create_subscription(t.msg_type, self._topic_name(t), callback, t.qos,
+                                       callback_group=group)
               for t, callback, group in inputs),
-            (owner, owner.create_service(Trigger, self.resolve_service_name(io.REPLAN_SERVICE),
-                                         self._on_service,
-                                         callback_group=ReentrantCallbackGroup()))]
+            self.create_service(Trigger, self.resolve_service_name(io.REPLAN_SERVICE),
+                                self._on_service, callback_group=ReentrantCallbackGroup())]
+        if replan_action.available():
+            self.action = replan_action.ReplanActionServer(
+                self, lambda: self.session, lambda: self._active, lambda: self.frame_id)
+        else:
+            self.diag(Level.WARN, Code.NO_ACTION,
+                      "the daddy_interfaces package is not built: no Replan action (the topic "
+                      "and the service serve re-plans; make interfaces builds it)", {}, None)
         self.get_logger().info(f"daddy_guidance configured: scenario {self.planner.case.name}, "
                                f"method {self.planner.method}, frame {self.frame_id}")
         return TransitionCallbackReturn.SUCCESS
@@ -178,18 +184,23 @@ class GuidanceNode(LifecycleNode):
     def on_shutdown(self, state: State) -> TransitionCallbackReturn:
         self._active = False
         self._teardown()
+        if self.when_finalized is not None:
+            self.when_finalized()
         return TransitionCallbackReturn.SUCCESS
 
     def _teardown(self) -> None:
         """Stop the worker and destroy what configure made. The planner object stays (a solve
         still finishing after the 5 s join may use it); the next configure builds a new one."""
         self.stop()
-        for owner, entity in self._entities:
+        for entity in self._entities:
             if isinstance(entity, Subscription):
-                owner.destroy_subscription(entity)
+                self.destroy_subscription(entity)
             else:
-                owner.destroy_service(entity)
+                self.destroy_service(entity)
         self._entities = []
+        if self.action is not None:
+            self.action.destroy()
+            self.action = None
         self.session = None
 
     def _bundled_plan(self) -> str:
@@ -249,12 +260,27 @@ class GuidanceNode(LifecycleNode):
             return
         self.session.request(msg.frame_id or "topic", cv.stamp_to_s(msg.stamp))
 
-    def _on_service(self, request, response):
-        if not self._active:
+    async def _on_service(self, request, response):
+        """The Trigger service: a re-plan from the newest estimate, answered when it has
+        finished (a coroutine: the estimates are served while it waits)."""
+        session = self.session
+        if not self._active or session is None:
             response.success = False
             response.message = f"ERROR: the node is {self.lifecycle_state}, not active"
             return response
-        response.success, response.message = self.session.request_and_wait()
+        number = session.request(f"service-{time.monotonic_ns()}", None)
+        # the next solve to start absorbs this request (coalescing); wait for it to finish
+        end = time.monotonic() + self.planner.time_budget_s * 3 + 10
+        report: SolveReport | None = None
+        while report is None and time.monotonic() < end and not session.queue.stopped():
+            await pause(self, replan_action.POLL_S)
+            report = session.report_of(number)
+        if report is None:
+            response.success, response.message = False, "timed out waiting for the solve"
+            return response
+        stored = report.outcome is not None and report.outcome.ok
+        response.success = stored and report.level is not Level.ERROR
+        response.message = f"{report.level}: {report.reason}"
         return response
 
     def adopt_plan(self, plan: Plan) -> None:
@@ -264,7 +290,7 @@ class GuidanceNode(LifecycleNode):
     # ------------------------------------------------------------------ outputs (session.Outputs)
     def publish_plan(self, plan: Plan, stamp: float | None) -> None:
         self.pub_schedule.publish(cv.plan_to_joint_trajectory(
-            plan, f"{self.frame_id}_rtn" if plan.thrust_rtn else self.frame_id, stamp))
+            plan, cv.schedule_frame(plan, self.frame_id), stamp))
         self.pub_path.publish(cv.plan_to_path(plan, self.frame_id))
 
     def publish_thrust(self, thrust_n: np.ndarray, stamp: float) -> None:
@@ -296,7 +322,7 @@ class GuidanceNode(LifecycleNode):
 
 
 def main(args=None) -> int:
-    return run_node(lambda: GuidanceNode(separate_service_node=True), args)
+    return run_node(GuidanceNode, args)
 
 
 if __name__ == "__main__":

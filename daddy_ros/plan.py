@@ -60,6 +60,8 @@ class Code(str, Enum):
     RESTORED = "RESTORED"                   # a persisted plan restored after a restart
     FEEDBACK_LAW = "FEEDBACK_LAW"           # a stage's thrust from the plan's feedback law
     PLAN_DOES_NOT_FIT = "PLAN_DOES_NOT_FIT"  # the estimate is far from the plan: no thrust from it
+    CANCELLED = "CANCELLED"                 # the re-plan was cancelled: plan kept
+    NO_ACTION = "NO_ACTION"                 # daddy_interfaces not built: no Replan action
     STAMP_JUMP = "STAMP_JUMP"               # an estimate's stamp far from the flight's clock
     CLOCK_CHANGED = "CLOCK_CHANGED"         # consistent estimates set a new flight clock
     INTERNAL_ERROR = "INTERNAL_ERROR"       # a bug: reported, the node goes on

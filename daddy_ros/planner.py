@@ -23,6 +23,7 @@ from daddy_core.path_constraints import dense_margin
 from daddy_core.errors import DaddyError
 from daddy_core.problem import Problem
 from daddy_core.solver import Solution, WarmStart, preload, solve
+from daddy_core.solver.deadline import CancelFlag, Deadline
 from daddy_core.solver.stage_maps import StageMaps, expand_dynamics
 
 from .assessment import Assessment, assess
@@ -40,9 +41,14 @@ from .shift import MIN_STAGES_LEFT, Shifted, shift_plan
 MIN_SOLVE_BUDGET_S = 1e-3
 
 
-def _left(deadline: float) -> float:
-    """Seconds left before a ``time.perf_counter`` deadline (negative: past it)."""
-    return deadline - time.perf_counter()
+@dataclass(frozen=True)
+class _Run:
+    """One re-plan's deadline (its budget and cancel flag), the solver's progress callback
+    (or None) and the budget [s]."""
+
+    deadline: Deadline
+    progress: object
+    budget_s: float
 
 
 @dataclass
@@ -121,12 +127,17 @@ class GuidancePlanner:
 
     # ------------------------------------------------------------------ re-optimisation
     def replan(self, pos_m, vel_m_s, mass_kg, stamp_s: float, request_id: str = "",
-               now_s: float | None = None, cold: bool = False) -> ReplanOutcome:
+               now_s: float | None = None, cold: bool = False,
+               time_budget_s: float | None = None, cancel: CancelFlag | None = None,
+               progress=None) -> ReplanOutcome:
         """Re-optimise from an estimate; store and return the new plan if it is valid.
 
         Never raises for solver trouble: a failed, non-finite or bound-violating result leaves
         the last valid plan in place and is reported as ERROR/WARN. Bad inputs raise
-        InputRejected before anything is touched.
+        InputRejected before anything is touched. time_budget_s: this re-plan's budget [s]
+        (None: the configured one); cancel: a flag (``threading.Event``) that stops the solve
+        within one iteration, the plan in force kept (Code.CANCELLED); progress: the solver's
+        progress lines (``daddy_core.solver.progress.ProgressLine``).
         """
         x0 = self.checks.check_state(pos_m, vel_m_s, mass_kg, stamp_s, now_s)
         plan = None if cold else self.plan   # read once: another thread may adopt a plan
@@ -139,38 +150,45 @@ class GuidancePlanner:
         rung = self._start_rung(plan, start.U) if warm else 0
         problem = self._rated(shifted.problem, rung)
         t0 = time.perf_counter()
-        deadline = t0 + self.time_budget_s   # one budget for the whole re-plan, ladder included
+        budget = self.time_budget_s if time_budget_s is None else time_budget_s
+        # one budget for the whole re-plan, ladder included
+        run = _Run(Deadline(t0 + budget, cancel), progress, budget)
         try:
-            best = self._solve(problem, start, opts, deadline)
+            best = self._solve(problem, start, opts, run)
         except Exception as exc:  # a solver fault must never take the plan down
             return ReplanOutcome(False, Level.ERROR, f"solver raised {type(exc).__name__}: "
                                  f"{exc}", request_id, time.perf_counter() - t0, None,
                                  warm_start=warm, code=Code.SOLVER_FAILED)
-        best = self._climb(best, rung, start.U, opts, deadline)
+        best = self._climb(best, rung, start.U, opts, run)
+        if run.deadline.cancelled:
+            return ReplanOutcome(False, Level.WARN, "cancelled: the plan in force is kept",
+                                 request_id, time.perf_counter() - t0, None,
+                                 best.sol.iterations, warm, Code.CANCELLED)
         return self._adopt(best, shifted.problem, start.U, warm, stamp_s, request_id,
-                           time.perf_counter() - t0)
+                           time.perf_counter() - t0, budget)
 
-    def _solve(self, problem: Problem, start: WarmStart, opts, deadline: float) -> _Attempt:
+    def _solve(self, problem: Problem, start: WarmStart, opts, run: _Run) -> _Attempt:
         """Solve and assess; a polished result that is not safe (polishing an infeasible
         problem can push the thrust past its bound) falls back to the unpolished DDP result,
         which keeps the bound and minimises the terminal miss (time permitting)."""
-        best = self._attempt(problem, start, opts, self.config.polish, deadline)
-        if not best.verdict.safe and self.config.polish and _left(deadline) > 0:
+        best = self._attempt(problem, start, opts, self.config.polish, run)
+        if not best.verdict.safe and self.config.polish and run.deadline.left() > 0:
             U = best.verdict.U if np.all(np.isfinite(best.verdict.U)) else start.U
-            best = self._attempt(problem, U, opts, False, deadline)
+            best = self._attempt(problem, U, opts, False, run)
         return best
 
-    def _attempt(self, problem: Problem, guess, opts, polish: bool,
-                 deadline: float) -> _Attempt:
+    def _attempt(self, problem: Problem, guess, opts, polish: bool, run: _Run) -> _Attempt:
         """One solve of ``problem`` from ``guess`` (controls or a WarmStart) in the time left
-        before ``deadline``, assessed."""
-        opts = opts.with_(run=dict(time_budget_s=max(_left(deadline), MIN_SOLVE_BUDGET_S)))
+        of the re-plan ``run``, assessed."""
+        left = run.deadline.left()
+        opts = opts.with_(run=dict(time_budget_s=max(left, MIN_SOLVE_BUDGET_S)))
         sol = solve(problem, guess, method=self.method, fuel_optimal=None, polish=polish,
-                    options=opts, case_name=self.case.name)
+                    options=opts, case_name=self.case.name, progress=run.progress,
+                    cancel=run.deadline.cancel)
         return _Attempt(sol, problem, assess(sol, problem, self._feasibility_tol))
 
     def _climb(self, best: _Attempt, rung: int, U_guess: np.ndarray, opts,
-               deadline: float) -> _Attempt:
+               run: _Run) -> _Attempt:
         """The thrust-margin ladder: while the target is out of reach, give up the next part
         of the margin (``replan_policy``), keeping a higher rung's result only where it is
         safe and misses less. Each rung solves in what is left of the re-plan's budget; when
@@ -178,9 +196,9 @@ class GuidancePlanner:
         next one climbs from the plan it stored)."""
         while not (best.verdict.safe and best.verdict.feasible) and \
                 rung + 1 < len(self.rated_problems):
-            if _left(deadline) <= 0:
+            if run.deadline.left() <= 0:
                 best = replace(best, failed_rungs=best.failed_rungs + (
-                    f"rung {rung + 1}: not tried, the {self.time_budget_s:.3g} s budget was "
+                    f"rung {rung + 1}: not tried, the {run.budget_s:.3g} s budget was "
                     "spent",))
                 break
             rung += 1
@@ -188,7 +206,7 @@ class GuidancePlanner:
             safe = best.verdict.safe
             try:
                 trial = self._attempt(rated, best.verdict.U if safe else U_guess, opts,
-                                      self.config.polish, deadline)
+                                      self.config.polish, run)
             except Exception as exc:  # noqa: BLE001  a solver fault on this rung: try the next
                 best = replace(best, failed_rungs=best.failed_rungs + (
                     f"rung {rung}: {type(exc).__name__}: {exc}",))
@@ -204,7 +222,7 @@ class GuidancePlanner:
         return best
 
     def _adopt(self, best: _Attempt, problem: Problem, U_guess: np.ndarray, warm: bool,
-               stamp_s: float, request_id: str, dt: float) -> ReplanOutcome:
+               stamp_s: float, request_id: str, dt: float, budget_s: float) -> ReplanOutcome:
         """Store the new plan if it may replace the one in force, and say why or why not."""
         sol, v = best.sol, best.verdict
         failed = (f" (thrust-margin ladder: {'; '.join(best.failed_rungs)})"
@@ -231,9 +249,9 @@ class GuidancePlanner:
         elif not sol.converged:
             level, reason, code = (Level.WARN, f"stored best feasible iterate: {sol.reason}",
                                    Code.NOT_CONVERGED)
-        if dt > self.time_budget_s:
+        if dt > budget_s:
             level, code = Level.WARN, Code.BUDGET_EXCEEDED
-            reason = (f"solve took {dt:.3g} s, over the {self.time_budget_s:.3g} s budget "
+            reason = (f"solve took {dt:.3g} s, over the {budget_s:.3g} s budget "
                       f"({reason})")
         return ReplanOutcome(True, level, reason, request_id, dt, plan, sol.iterations, warm,
                              code)

@@ -12,15 +12,16 @@ from __future__ import annotations
 import threading
 import time
 from collections import deque
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 from .checks import FUTURE_TOLERANCE_S, InputRejected
-from .plan import TIME_TOLERANCE_S, Code, Level
+from .plan import TIME_TOLERANCE_S, Code
 
 STATE_HISTORY = 64   # accepted estimates kept to serve requests stamped in their past
 # a request stamped after the newest estimate waits this long for the estimate of its time
 # (a request can overtake the estimate sent before it)
 ESTIMATE_WAIT_S = 0.5
+REPORTS_KEPT = 16   # finished solves whose reports a late goal can still read
 
 
 @dataclass(frozen=True)
@@ -38,10 +39,13 @@ class Estimate:
 @dataclass(frozen=True)
 class Request:
     """A re-plan request taken by the worker: its id and mission time (None: serve the newest
-    estimate, as the Trigger service does)."""
+    estimate, as the Trigger service does), whether to solve cold, and its time budget [s]
+    (None: the node's)."""
 
     request_id: str
     stamp_s: float | None
+    cold: bool = False
+    time_budget_s: float | None = None
 
 
 class RequestQueue:
@@ -58,7 +62,7 @@ class RequestQueue:
         self.started = 0            # solves started / finished (sequential, one worker)
         self.finished = 0
         self.coalesced = 0
-        self.last = (Level.ERROR, "no solve yet", False)   # (level, reason, new plan stored)
+        self._reports: dict[int, object] = {}   # solve number -> its report (the last few)
 
     # ------------------------------------------------------------------ estimates
     def add_state(self, pos_m, vel_m_s, stamp_s: float, pos_sigma_m: float | None = None,
@@ -103,12 +107,15 @@ class RequestQueue:
         return max(before)[1] if before else masses[-1][1]
 
     # ------------------------------------------------------------------ requests
-    def enqueue(self, request_id: str, stamp_s: float | None) -> int:
-        """Queue a re-plan; returns the number of the solve that will serve it."""
+    def enqueue(self, request_id: str, stamp_s: float | None, cold: bool = False,
+                time_budget_s: float | None = None) -> int:
+        """Queue a re-plan; returns the number of the solve that will serve it (a request
+        coalesced with a waiting one replaces it, options included)."""
         with self.cond:
             if self._pending is not None or self._busy:
                 self.coalesced += 1
-            self._pending = (request_id, stamp_s, time.monotonic())
+            self._pending = (Request(request_id, stamp_s, cold, time_budget_s),
+                             time.monotonic())
             self.cond.notify_all()
             return self.started + 1
 
@@ -121,14 +128,14 @@ class RequestQueue:
                 self.cond.wait(0.2)
             if self._stopped:
                 return None
-            request_id, stamp, arrived = self._pending
+            req, arrived = self._pending
             self._pending = None
-            self._wait_for_estimate(stamp)
-            if stamp is not None:
-                stamp += time.monotonic() - arrived
+            self._wait_for_estimate(req.stamp_s)
+            if req.stamp_s is not None:
+                req = replace(req, stamp_s=req.stamp_s + time.monotonic() - arrived)
             self._busy = True
             self.started += 1
-            return Request(request_id, stamp)
+            return req
 
     def _wait_for_estimate(self, request_stamp: float | None) -> None:
         """(cond held) Wait for an estimate stamped near the request and for the mass
@@ -146,10 +153,28 @@ class RequestQueue:
         while not self._stopped and time.monotonic() < end and not ready():
             self.cond.wait(0.02)
 
-    def record(self, level: Level, reason: str, stored: bool) -> None:
-        """The outcome of the solve running now (what a waiting Trigger call answers)."""
+    def record(self, report) -> None:
+        """The report of the solve running now (``session.SolveReport``: what the requests it
+        served are answered, ``report_of``)."""
         with self.cond:
-            self.last = (level, reason, stored)
+            self._reports[self.started] = report
+            for n in [n for n in self._reports if n <= self.started - REPORTS_KEPT]:
+                del self._reports[n]
+
+    def report_of(self, number: int):
+        """The report of solve ``number`` (None: not finished, or long forgotten)."""
+        with self.cond:
+            return self._reports.get(number)
+
+    def running(self, number: int) -> bool:
+        """Solve ``number`` has started and not finished."""
+        with self.cond:
+            return self._busy and self.started == number
+
+    def waiting(self, number: int) -> bool:
+        """Solve ``number`` has not started yet."""
+        with self.cond:
+            return self.started < number and not self._stopped
 
     def done(self) -> None:
         """(worker) The solve taken last has finished."""
@@ -158,14 +183,9 @@ class RequestQueue:
             self.finished += 1
             self.cond.notify_all()
 
-    def wait_done(self, target: int, timeout_s: float) -> tuple[bool, tuple]:
-        """Wait until solve number ``target`` has finished (or the time is up, or stop):
-        (finished, the last outcome)."""
-        deadline = time.monotonic() + timeout_s
+    def stopped(self) -> bool:
         with self.cond:
-            while self.finished < target and time.monotonic() < deadline and not self._stopped:
-                self.cond.wait(0.1)
-            return self.finished >= target, self.last
+            return self._stopped
 
     def stop(self) -> None:
         with self.cond:

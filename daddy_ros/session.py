@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import threading
 import time
+from dataclasses import dataclass
 from pathlib import Path
 from typing import TYPE_CHECKING, Protocol
 
@@ -44,6 +45,19 @@ class Outputs(Protocol):
     def solved(self, level: Level, reason: str, solve_s: float | None) -> None: ...
 
 
+@dataclass(frozen=True)
+class SolveReport:
+    """How one re-plan ended, for the requests it served: its id, level, code and reason, the
+    planner's outcome (None when no solve ran) and the plan in force afterwards."""
+
+    request_id: str
+    level: Level
+    code: Code
+    reason: str
+    outcome: object
+    plan: Plan | None
+
+
 class GuidanceSession:
     """The planner, the request queue, the re-plan policy and the worker of one configured node.
 
@@ -63,6 +77,8 @@ class GuidanceSession:
         self._withheld: list[float] = []   # estimate stamps whose thrust waits for a re-plan
         self._withheld_lock = threading.Lock()
         self._unanswered: list[float] = []   # estimate stamps that came before any plan
+        self._cancel = threading.Event()    # the running solve's cancel flag
+        self.figures: dict = {}             # the running solve's progress (``ProgressLine``)
         self._replan_on_first_estimate = False
         self.fit = PlanFit(planner.case, planner.config.fit_position_m,
                            planner.config.fit_velocity_m_s)
@@ -152,14 +168,27 @@ class GuidanceSession:
         """Queue a re-plan request; returns the id that will serve it."""
         return self.queue.enqueue(request_id, stamp)
 
-    def request_and_wait(self) -> tuple[bool, str]:
-        """A blocking re-plan (the Trigger service): (success, message)."""
-        target = self.queue.enqueue(f"service-{time.monotonic_ns()}", None)
-        # the next solve to start absorbs this request (coalescing); wait for it to finish
-        done, (level, reason, stored) = self.queue.wait_done(
-            target, self.planner.time_budget_s * 3 + 10)
-        return (done and stored and level is not Level.ERROR,
-                f"{level}: {reason}" if done else "timed out waiting for the solve")
+    def request_goal(self, request_id: str, stamp: float | None, cold: bool,
+                     time_budget_s: float | None) -> int:
+        """Queue a re-plan for an action goal; returns the number of the solve that will serve
+        it (``report_of``, ``cancel``)."""
+        return self.queue.enqueue(request_id, stamp, cold, time_budget_s)
+
+    def cancel(self, number: int) -> bool:
+        """Cancel solve ``number`` if it is running: it stops within one iteration and the
+        plan in force is kept. False when it is not running (not started, or finished)."""
+        if not self.queue.running(number):
+            return False
+        self._cancel.set()
+        return True
+
+    def report_of(self, number: int) -> SolveReport | None:
+        return self.queue.report_of(number)
+
+    def _progress(self, line) -> None:
+        """The running solve's progress line: its figures are kept for the action feedback."""
+        figures = getattr(line, "figures", None)
+        self.figures = {**self.figures, **(figures or {}), "line": str(line).strip()}
 
     def _self_triggered(self, est: StateEstimate, stamp: float, plan: Plan) -> bool:
         """Ask the re-plan policy about an accepted estimate; when a re-plan is due, queue it
@@ -261,15 +290,18 @@ class GuidanceSession:
             req = self.queue.take()
             if req is None:
                 return
+            self._cancel.clear()
+            self.figures = {}
             try:
-                self._replan_once(req.request_id, req.stamp_s)
+                self._replan_once(req.request_id, req.stamp_s, req.cold, req.time_budget_s)
             except Exception as exc:  # never let the worker die
                 self._finish(req.request_id, None, Level.ERROR, Code.INTERNAL_ERROR,
                              f"internal error: {exc!r}", None)
             finally:
                 self.queue.done()
 
-    def _replan_once(self, request_id: str, request_stamp: float | None) -> None:
+    def _replan_once(self, request_id: str, request_stamp: float | None, cold: bool = False,
+                     time_budget_s: float | None = None) -> None:
         started = {"solve_start_unix_s": f"{time.time():.6f}"}
         try:
             state = self.queue.state_for(request_stamp)
@@ -294,16 +326,17 @@ class GuidanceSession:
         # a plan that does not fit the estimate is no warm start either (a restarted node's
         # nominal days into the flight): solved cold from the estimate
         plan = self.planner.plan
-        cold = plan is not None and not self.fit.check(plan, stamp, pos, vel).fits
+        misfit = plan is not None and not self.fit.check(plan, stamp, pos, vel).fits
+        watch = dict(time_budget_s=time_budget_s, cancel=self._cancel, progress=self._progress)
         try:
             out = self.planner.replan(pos, vel, mass, stamp, request_id, now_s=request_stamp,
-                                      cold=cold)
-            if cold and not out.ok:
+                                      cold=cold or misfit, **watch)
+            if misfit and not out.ok and out.code is not Code.CANCELLED:
                 # the cold start's fallback: the warm start from the plan in force (a plan
                 # solved from the estimate fits it, whichever start found it), where the cold
                 # solve failed (docs/design-notes.md: cold re-plan, warm fallback)
                 out = self.planner.replan(pos, vel, mass, stamp, request_id,
-                                          now_s=request_stamp, cold=False)
+                                          now_s=request_stamp, cold=False, **watch)
         except InputRejected as exc:
             self._finish(request_id, None, Level.ERROR, exc.code, f"input rejected: {exc}", now,
                          started)
@@ -327,7 +360,7 @@ class GuidanceSession:
         self.out.diag(level, code, reason, values, stamp)
         self.out.solved(level, reason, out.solve_time_s if out is not None else None)
         self._release_withheld(plan)
-        self.queue.record(level, reason, bool(out is not None and out.ok))
+        self.queue.record(SolveReport(request_id, level, code, reason, out, plan))
 
     def _release_withheld(self, plan: Plan | None) -> None:
         """The thrust commands withheld for the estimates that triggered this re-plan (or were

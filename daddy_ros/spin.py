@@ -1,7 +1,10 @@
-"""Spinning rclpy nodes: a guarded spin loop and a node spun on its own executor thread.
+"""Spinning rclpy nodes: a guarded spin loop, a node spun on its own executor thread, and the
+awaitable pause with which coroutine callbacks wait for the solver worker.
 
 One single-threaded executor per node: rclpy's multi-threaded executor busy-polls, taking CPU
-the solver worker needs.
+the solver worker needs. A callback that waits for a solve (the Trigger service, the Replan
+action) is a coroutine that awaits ``pause`` between looks at the worker, so the estimates are
+served meanwhile.
 """
 from __future__ import annotations
 
@@ -15,6 +18,7 @@ import rclpy
 from rclpy.executors import SingleThreadedExecutor
 from rclpy.node import Node
 from rclpy.signals import SignalHandlerOptions
+from rclpy.task import Future
 
 from daddy_core.errors import DaddyError
 
@@ -35,9 +39,20 @@ def spin_guarded(executor, stop: threading.Event, on_error=None) -> None:
                 on_error(exc)
 
 
+async def pause(node: Node, seconds: float) -> None:
+    """Await ``seconds`` in a coroutine callback of ``node``: its executor serves the other
+    callbacks meanwhile (a one-shot timer completes the future)."""
+    done = Future()
+    timer = node.create_timer(seconds, lambda: done.done() or done.set_result(None))
+    try:
+        await done
+    finally:
+        node.destroy_timer(timer)
+
+
 class SpinThread:
     """A node spun by its own single-threaded executor in a daemon thread (in-process use:
-    demo, tests, tools, the service helper). ``shutdown()`` stops and joins the thread before
+    demo, tests, tools). ``shutdown()`` stops and joins the thread before
     the executor is shut down, so no rclpy call is in flight when nodes are destroyed."""
 
     def __init__(self, node: Node):
@@ -58,10 +73,11 @@ class SpinThread:
 
 
 class ServedNode(Protocol):
-    """What ``run_node`` needs of a node: rclpy's Node, a helper node for a blocking service
-    (or None), a way to stop its worker, and where an escaped callback error is reported."""
+    """What ``run_node`` needs of a node: rclpy's Node, a way to stop its worker, where an
+    escaped callback error is reported, and ``when_finalized``, which it calls when its
+    lifecycle reaches finalized (the process then exits)."""
 
-    service_node: Node | None
+    when_finalized: Callable[[], None] | None
 
     def stop(self) -> None: ...
 
@@ -74,9 +90,9 @@ def run_node(node_factory: Callable[[], ServedNode], args=None) -> int:
     """Spin a node with our own SIGINT/SIGTERM handling and a clean shutdown sequence; 2 when
     the node cannot be built (a bad parameter: the message on stderr).
 
-    The node's callbacks run on a single-threaded executor; a blocking service hosted on
-    ``node.service_node`` gets its own executor thread so it never stalls the subscriptions.
-    The ROS environment (discovery range, domain) is the caller's: nothing is set here."""
+    The node's callbacks run on a single-threaded executor; the process exits on SIGINT or
+    SIGTERM, or once the node's lifecycle is finalized (its shutdown transition). The ROS
+    environment (discovery range, domain) is the caller's: nothing is set here."""
     rclpy.init(args=args, signal_handler_options=SignalHandlerOptions.NO)
     stop = threading.Event()
     for sig in (signal.SIGINT, signal.SIGTERM):
@@ -87,19 +103,14 @@ def run_node(node_factory: Callable[[], ServedNode], args=None) -> int:
         print(f"guidance_node: {exc}", file=sys.stderr)
         rclpy.try_shutdown()
         return 2
+    node.when_finalized = stop.set
     executor = SingleThreadedExecutor()
     executor.add_node(node)
-    side = node.service_node
-    side_executor = SpinThread(side) if side is not None else None
     try:
         spin_guarded(executor, stop, node.report_internal_error)
     finally:
         node.stop()
-        for ex in (executor, side_executor):
-            if ex is not None:
-                ex.shutdown(timeout_sec=2.0)
+        executor.shutdown(timeout_sec=2.0)
         node.destroy_node()
-        if side is not None:
-            side.destroy_node()
         rclpy.try_shutdown()
     return 0

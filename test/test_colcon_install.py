@@ -75,8 +75,8 @@ def test_installed_node_starts_and_stops(install, tmp_path):
         end = time.monotonic() + 30
         while time.monotonic() < end and proc.poll() is None:
             names = set(node.get_node_names_and_namespaces())
-            if {("daddy_guidance", ns), ("daddy_guidance_service", ns)} <= names:
-                found = True   # the service helper joins the node's namespace too
+            if ("daddy_guidance", ns) in names:
+                found = True
                 break
             rclpy.spin_once(node, timeout_sec=0.1)
         staleness = None
@@ -88,9 +88,12 @@ def test_installed_node_starts_and_stops(install, tmp_path):
                 rclpy.spin_until_future_complete(node, fut, timeout_sec=15)
                 if fut.done():
                     staleness = fut.result().values[0].double_value
+        # one node per instance (issue 49): nothing else joined its namespace meanwhile
+        in_ns = sorted(n for n, space in node.get_node_names_and_namespaces() if space == ns)
         node.destroy_node()
         rclpy.try_shutdown()
         assert found, "the installed node did not join the graph"
+        assert in_ns == ["daddy_guidance"], in_ns
         assert staleness == 123.0, f"the parameters file did not apply in {ns}: {staleness}"
         proc.send_signal(signal.SIGINT)
         out, _ = proc.communicate(timeout=20)

@@ -6,7 +6,6 @@ import time
 import pytest
 
 from daddy_ros.checks import InputRejected
-from daddy_ros.plan import Level
 from daddy_ros.request_queue import RequestQueue
 
 
@@ -21,12 +20,25 @@ def test_requests_during_a_solve_are_coalesced_into_the_newest():
     for rid in ("b", "c", "d"):
         assert q.enqueue(rid, 10.0) == 2
     assert q.coalesced == 3
-    q.record(Level.OK, "re-optimised", True)
+    q.record("report of a")
     q.done()
     nxt = q.take()
     assert nxt.request_id == "d" and q.started == 2 and q.finished == 1
+    assert q.running(2) and not q.waiting(2) and q.report_of(2) is None
+    q.record("report of d")
     q.done()
-    assert q.wait_done(2, 0.1) == (True, (Level.OK, "re-optimised", True))
+    assert not q.running(2) and q.report_of(1) == "report of a" and q.report_of(2) == "report of d"
+
+
+def test_a_request_s_options_travel_with_it_and_the_newest_wins_when_coalesced():
+    q = RequestQueue(estimate_wait_s=0.0)
+    q.add_state([1, 0, 0], [0, 1, 0], 10.0)
+    q.add_mass(10.0, 900.0)
+    q.enqueue("a", None, cold=True, time_budget_s=5.0)
+    assert q.waiting(1)
+    q.enqueue("b", None, cold=False, time_budget_s=2.0)
+    req = q.take()
+    assert (req.request_id, req.cold, req.time_budget_s) == ("b", False, 2.0)
 
 
 def test_the_estimate_for_a_request_and_the_mass_of_its_time():
@@ -66,4 +78,4 @@ def test_stop_releases_the_worker_and_waiting_callers():
     q.stop()
     th.join(2.0)
     assert got == [None]
-    assert q.wait_done(1, 5.0)[0] is False
+    assert q.stopped() and not q.waiting(1)

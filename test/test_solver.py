@@ -1056,3 +1056,27 @@ def test_a_trust_region_step_that_fails_at_a_few_stages_bounds_those_stages_only
         sol = solve(prob, st.U, options=opts.with_(ddp=dict(stage_trust=stage_trust)))
         assert sol.converged, sol.reason
         np.testing.assert_allclose(sol.U, ref.U, atol=1e-6)
+
+
+def test_a_cancel_flag_stops_the_solve_within_one_iteration_with_a_finite_answer():
+    """``solve(cancel=...)``: set by the solver's first progress line (a homotopy step's, which
+    carries its figures), the solve stops before its next iteration and says why; its answer is
+    finite and not called converged."""
+    import threading
+
+    from daddy_core.solver.progress import ProgressLine
+    case = load_case("earth_mars")
+    flag, lines = threading.Event(), []
+
+    def progress(line):
+        lines.append(line)
+        if isinstance(line, ProgressLine) and "homotopy_step" in line.figures:
+            flag.set()
+
+    sol = solve(problem_from_case(case), options=case_options(case, True), progress=progress,
+                cancel=flag)
+    steps = [ln.figures for ln in lines if isinstance(ln, ProgressLine)]
+    assert flag.is_set() and steps[0]["homotopy_step"] == 1 and steps[0]["homotopy_steps"] > 1
+    assert not sol.converged and "cancelled by the caller" in sol.reason
+    assert sol.iterations["ddp"] <= 1
+    assert np.all(np.isfinite(sol.U)) and np.all(np.isfinite(sol.X))

@@ -4,7 +4,6 @@ safeguards beyond the paper are named hooks in ``aul_safeguards``."""
 from __future__ import annotations
 
 import math
-import time
 from dataclasses import dataclass
 
 import numpy as np
@@ -12,9 +11,11 @@ import numpy as np
 from ..problem import largest, max_violation
 from . import aul_safeguards as safe
 from . import multiplier_update
+from .deadline import Deadline, passed
 from .ddp import DDPResult, DDPStats, ddp
 from .lagrangian import Multipliers
 from .options import Method, MultiplierUpdate, SolverOptions
+from .progress import ProgressLine
 from .results import Status, StepResult
 from .sweeps import Gains, Stages
 
@@ -56,7 +57,7 @@ def _next_multipliers(st: Stages, mult: Multipliers, g, gt, opts: SolverOptions)
 
 
 def aul(st: Stages, method: Method, opts: SolverOptions, stats: DDPStats,
-        deadline: float | None = None, progress=None, rho0: float | None = None) -> AULResult:
+        deadline: Deadline | None = None, progress=None, rho0: float | None = None) -> AULResult:
     """Alg. 4 from the expanded nominal ``st`` (its multipliers and homotopy point): DDP on the
     augmented cost, multiplier and penalty updates (eq. 9), until the maximum constraint
     violation is below tol_aul. rho0: Quu regularisation to start from (None: opts.ddp.rho_init);
@@ -77,11 +78,13 @@ def aul(st: Stages, method: Method, opts: SolverOptions, stats: DDPStats,
         g, ni, gt, nti = problem.constraint_values(st.X, st.U)
         gmax = largest(max_violation(g, ni), max_violation(gt, nti))
         if progress is not None:
-            progress(f"  AUL {it:2d}: DDP {res.iterations:3d} it ({res.reason}), "
-                     f"cost {st.cost:.6e}, max violation {gmax:.2e}")
+            progress(ProgressLine(f"  AUL {it:2d}: DDP {res.iterations:3d} it ({res.reason}), "
+                                  f"cost {st.cost:.6e}, max violation {gmax:.2e}",
+                                  aul_iteration=it, ddp_iterations=res.iterations,
+                                  cost=float(st.cost), max_violation=float(gmax)))
         status = None
-        if deadline is not None and time.perf_counter() > deadline:
-            status = Status.TIME_BUDGET
+        if passed(deadline):
+            status = deadline.status
         elif it == 1 and both_cut_off and safe.diverged(
                 gmax, gmax_start := problem.violation(start.X, start.U), both_cut_off, opts):
             # (the start, the less violating point, is what the loop returns)
@@ -104,7 +107,7 @@ def aul(st: Stages, method: Method, opts: SolverOptions, stats: DDPStats,
 
 
 def _ddp_solve(st: Stages, method: Method, opts: SolverOptions, stats: DDPStats,
-               deadline: float | None, rho, radius: float, progress,
+               deadline: Deadline | None, rho, radius: float, progress,
                it: int) -> tuple[DDPResult, bool, SolverOptions]:
     """One DDP solve of the loop, and its trust-region retry (``safe.fallback_options``):
     the result, whether both were cut off, and the options the loop goes on with."""

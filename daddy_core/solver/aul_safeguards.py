@@ -14,6 +14,7 @@ from __future__ import annotations
 import numpy as np
 
 from . import newton
+from .deadline import Deadline
 from .lagrangian import Multipliers
 from .options import Globalization, SolverOptions
 from .results import Status, not_halved
@@ -40,7 +41,7 @@ def fallback_options(res, opts: SolverOptions) -> SolverOptions | None:
                                tr_ratio_tol=max(opts.ddp.tr_ratio_tol, FALLBACK_RATIO_TOL)))
 
 
-def without_drift(st: Stages, opts: SolverOptions, deadline: float | None) -> Stages:
+def without_drift(st: Stages, opts: SolverOptions, deadline: Deadline | None) -> Stages:
     """``st``, or -- when its states have drifted from the dynamics -- the expansions of a
     consistent trajectory near it: Newton's restoration (its stage defects and constraints to
     tol_newton; the controls' exact rollout when Newton fails).

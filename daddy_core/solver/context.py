@@ -8,24 +8,31 @@ from contextlib import contextmanager
 from dataclasses import dataclass, field
 
 from ..problem import Problem
+from .deadline import CancelFlag, Deadline, passed
 from .ddp import DDPStats
 from .options import Method, SolverOptions
 
 
 @dataclass
 class Clock:
-    """Start, deadline and the phase timings of one solve (``Solution.runtime_s``, s)."""
+    """Start, deadline and the phase timings of one solve (``Solution.runtime_s``, s); cancel:
+    the caller's cancel flag (``deadline.CancelFlag``) or None."""
 
     budget_s: float | None
     start: float = field(default_factory=time.perf_counter)
     times: dict = field(default_factory=dict)
+    cancel: CancelFlag | None = None
 
     @property
-    def deadline(self) -> float | None:
-        return None if self.budget_s is None else self.start + self.budget_s
+    def deadline(self) -> Deadline | None:
+        """The solve's ``Deadline`` (None: no budget and no cancel flag)."""
+        if self.budget_s is None and self.cancel is None:
+            return None
+        return Deadline(None if self.budget_s is None else self.start + self.budget_s,
+                        self.cancel)
 
     def out_of_time(self) -> bool:
-        return self.deadline is not None and time.perf_counter() >= self.deadline
+        return passed(self.deadline)
 
     @contextmanager
     def phase(self, name: str):

@@ -15,6 +15,7 @@ import numpy as np
 
 from .globalization import Blame, StepControl
 from .options import Method, SolverOptions, Sweep
+from .deadline import Deadline, passed
 from .results import Status, StepResult
 from .stopping import CONVERGED, Stopping
 from .sweeps import Gains, Stages, Trial, backward_sweep, new_maps
@@ -69,7 +70,7 @@ class _Nominal:
 
 
 def ddp(st: Stages, method: Method, opts: SolverOptions, stats: DDPStats,
-        deadline: float | None = None, rho0: float | None = None,
+        deadline: Deadline | None = None, rho0: float | None = None,
         radius0: float = math.inf, retry: bool = False) -> DDPResult:
     """Alg. 3: backward sweep + forward pass until a stopping test ends the solve.
 
@@ -83,8 +84,8 @@ def ddp(st: Stages, method: Method, opts: SolverOptions, stats: DDPStats,
     cur = _Nominal(st)
     status, iterations = Status.DDP_MAX_ITER, opts.ddp.max_iter
     for it in range(1, opts.ddp.max_iter + 1):
-        if deadline is not None and time.perf_counter() > deadline:
-            status, iterations = Status.TIME_BUDGET, it - 1
+        if passed(deadline):
+            status, iterations = deadline.status, it - 1
             break
         outcome = _iteration(cur, method, ctl, stop, stats, it)
         if outcome is not None:

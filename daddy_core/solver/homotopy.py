@@ -15,9 +15,11 @@ from ..fuel import FUEL_HOMOTOPY
 from ..problem import Problem
 from .aul import aul, update_multipliers
 from .ddp import DDPStats
+from .deadline import Deadline
 from .sweeps import Gains, Stages
 from .lagrangian import Multipliers
 from .options import Method, SolverOptions
+from .progress import ProgressLine
 from .results import Status
 
 
@@ -84,7 +86,7 @@ def homotopy_steps(problem: Problem, U0: np.ndarray, opts: SolverOptions,
 
 
 def continuation(problem: Problem, X, U, steps: tuple, method: Method, opts: SolverOptions,
-                 stats: DDPStats, deadline: float | None = None, progress=None,
+                 stats: DDPStats, deadline: Deadline | None = None, progress=None,
                  rho: float | None = None, duals: dict | None = None, F=None,
                  numbering: tuple[int, int] | None = None) -> HomotopyResult:
     """Run the AUL (Alg. 4) on each homotopy step from (X, U) (F: their stage maps, if known;
@@ -105,7 +107,9 @@ def continuation(problem: Problem, X, U, steps: tuple, method: Method, opts: Sol
     for i, hom in enumerate(steps):
         if progress:
             before, total = numbering or (0, len(steps))
-            progress(f"homotopy {before + i + 1}/{total}: h = {hom[0]}, delta = {hom[1]}")
+            progress(ProgressLine(f"homotopy {before + i + 1}/{total}: h = {hom[0]}, "
+                                  f"delta = {hom[1]}", homotopy_step=before + i + 1,
+                                  homotopy_steps=total))
         mult.mu[...] = opts.aul.mu_init
         mult.mu_t[...] = opts.aul.mu_init
         st = (Stages(problem, X, U, mult, hom, opts.eps_da, F=F) if res is None
@@ -129,7 +133,7 @@ def continuation(problem: Problem, X, U, steps: tuple, method: Method, opts: Sol
                                   f"{res.max_violation:.2e})")
         elif not res.converged:
             converged, reason = False, f"homotopy step {i + 1}: {res.reason}"
-            if res.status in (Status.TIME_BUDGET, Status.AUL_DIVERGED):
+            if res.status in (Status.TIME_BUDGET, Status.CANCELLED, Status.AUL_DIVERGED):
                 break
     return HomotopyResult(best[0], best[1], res.stages, mult, gains, res.rho, aul_iterations,
                           history, converged, reason, stalled,

@@ -33,7 +33,6 @@ Every iterate it returns is feasible to tol_newton and no more costly than the o
 """
 from __future__ import annotations
 
-import time
 from dataclasses import dataclass
 
 import numpy as np
@@ -45,6 +44,7 @@ from .newton import (BandedSigma, ConstraintModel, NewtonResult, column_weights,
                      stage_columns)
 from .optimality import Optimality, every_constraint, objective, optimality
 from .options import SolverOptions
+from .deadline import Deadline, passed
 from .results import Status, StepResult, not_halved
 from .stage_maps import StageMaps
 
@@ -64,7 +64,7 @@ class KKTResult(StepResult):
 
 
 def kkt_polish(problem: Problem, X, U, hom, opts: SolverOptions, optimality0: Optimality,
-               deadline: float | None = None, stall_iter: int = 0) -> KKTResult:
+               deadline: Deadline | None = None, stall_iter: int = 0) -> KKTResult:
     """From a feasible (X, U) whose first-order optimality is ``optimality0``, Newton on the
     KKT conditions (module docstring) until the KKT residual is at most opts.kkt.tol,
     for at most opts.kkt.max_iter iterations, or (``stall_iter`` > 0) until the lowest residual
@@ -87,8 +87,8 @@ def kkt_polish(problem: Problem, X, U, hom, opts: SolverOptions, optimality0: Op
         if opt.kkt_residual <= opts.kkt.tol:
             status = Status.KKT_CONVERGED
             break
-        if deadline is not None and time.perf_counter() > deadline:
-            status = Status.TIME_BUDGET
+        if passed(deadline):
+            status = deadline.status
             break
         if not_halved(lowest, stall_iter):
             status = Status.KKT_STALLED
@@ -151,7 +151,7 @@ def _iteration(problem: Problem, X, U, hom, f: float, model: ConstraintModel,
         if f - fa >= 0.1 * predicted:
             good = f - fa >= 0.75 * predicted
             return res.X, res.U, fa, newton_its, mu_new, max(lv - 1, 0) if good else lv
-        if deadline is not None and time.perf_counter() > deadline:
+        if passed(deadline):
             break
     return None
 

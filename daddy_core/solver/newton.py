@@ -24,7 +24,6 @@ the previous plan's stage maps) and finishes a DDP solution, the same Alg. 11.
 """
 from __future__ import annotations
 
-import time
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -33,6 +32,7 @@ from .. import da
 from ..errors import DaddyError
 from ..problem import Problem, largest, max_violation
 from .options import SolverOptions
+from .deadline import Deadline, passed
 from .results import Status, StepResult, not_halved
 from .stage_maps import StageMaps, expand_dynamics
 
@@ -282,7 +282,7 @@ def _flat(current: list) -> bool:
             and bool(np.all(np.abs(np.diff(last)) <= _FLAT_TOL * np.abs(last[:-1]))))
 
 
-def polish(problem: Problem, X, U, opts: SolverOptions, deadline: float | None = None,
+def polish(problem: Problem, X, U, opts: SolverOptions, deadline: Deadline | None = None,
            maps: StageMaps | None = None) -> NewtonResult:
     """Alg. 11 from (X, U) to max active-constraint violation <= opts.newton.tol: the polishing
     of a DDP solution, and the restoration of a guess (``SolverOptions.start.restore``).
@@ -299,8 +299,8 @@ def polish(problem: Problem, X, U, opts: SolverOptions, deadline: float | None =
     run = _Run(X.copy(), U.copy(), maps)
     status = Status.NEWTON_MAX_ITER
     while run.it < opts.newton.max_iter:
-        if deadline is not None and time.perf_counter() > deadline:
-            status = Status.TIME_BUDGET
+        if passed(deadline):
+            status = deadline.status
             break
         fx, dmax, infeasibility = _residual(problem, run.X, run.U, opts.newton.active_tol)
         if not np.isfinite(dmax):

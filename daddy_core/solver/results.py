@@ -11,6 +11,7 @@ class Status(Enum):
     value is the message reported in ``Solution.reason``."""
 
     TIME_BUDGET = "time budget exceeded"
+    CANCELLED = "cancelled by the caller"
     # DDP
     DDP_CONVERGED = "relative cost decrease below tol_ddp"
     DDP_MAX_ITER = "ddp_max_iter reached"

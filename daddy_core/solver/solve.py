@@ -33,7 +33,7 @@ from .start import start
 def solve(problem: Problem, u_guess=None, method: Method | str = Method.DYN,
           fuel_optimal: bool | None = None, polish: bool = True,
           options: SolverOptions | None = None, case_name: str | None = None,
-          progress=None) -> Solution:
+          progress=None, cancel=None) -> Solution:
     """Solve ``problem`` with DADDy.
 
     Args:
@@ -48,6 +48,9 @@ def solve(problem: Problem, u_guess=None, method: Method | str = Method.DYN,
         polish: finish with the Newton polishing (Alg. 11) and the KKT end game.
         options: ``SolverOptions``.
         progress: callable receiving progress lines (or None; ``options.run.verbose``: print).
+        cancel: a flag with ``is_set()`` (a ``threading.Event``): once set, the solve stops
+            within one iteration and returns its best point so far, ``converged=False`` with
+            the reason 'cancelled by the caller'.
     Returns:
         a ``Solution``. A solve that fails returns ``converged=False`` with the reason and the
         best feasible-so-far iterate (never NaN).
@@ -55,7 +58,8 @@ def solve(problem: Problem, u_guess=None, method: Method | str = Method.DYN,
     layout = problem.parameters
     if layout is not None:   # static parameters (``static_parameters``): the user's guess padded
         u_guess = _padded_guess(layout, u_guess)
-    sol = _solve(problem, u_guess, method, fuel_optimal, polish, options, case_name, progress)
+    sol = _solve(problem, u_guess, method, fuel_optimal, polish, options, case_name, progress,
+                 cancel)
     order = (options or SolverOptions()).policy.order
     if layout is None:
         if order:   # an exact fuel optimum has its form's laws (``policy``)
@@ -102,7 +106,7 @@ def _padded_guess(layout, guess):
 
 
 def _solve(problem: Problem, u_guess, method, fuel_optimal, polish, options, case_name,
-           progress) -> Solution:
+           progress, cancel) -> Solution:
     """``solve`` (its arguments) once the guess has the problem's shape."""
     opts = options or SolverOptions()
     method = Method.parse(method)
@@ -113,7 +117,8 @@ def _solve(problem: Problem, u_guess, method, fuel_optimal, polish, options, cas
         warm = WarmStart.of(guess, p.stage_dt, o.ddp.carry_rho, p.t_start)
         U0 = p.check_guess(np.full((p.N, p.nu), 1e-6) if warm.U is None else warm.U)
         ctx = SolveContext(p, method, o, homotopy_steps(p, U0, o, fuel), polish,
-                           Clock(o.run.time_budget_s), progress=progress, rho0=warm.rho)
+                           Clock(o.run.time_budget_s, cancel=cancel), progress=progress,
+                           rho0=warm.rho)
         why = None if p.g_path is None else violated_at_start(p, U0[0], o.newton.tol)
         if why is not None:
             return unsolved(p, U0, why, ctx.steps, method, case_name)
