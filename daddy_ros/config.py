@@ -141,6 +141,10 @@ class NodeConfig:
                                               "/diagnostics [s] (lifecycle state, plan age, "
                                               "next stage, last solve); 0: none",
                                          static=True, bounds=(0.0, 3600.0))
+    bond_heartbeat_period_s: float = option(0.1, "heartbeat period of the bond with nav2's "
+                                                 "lifecycle manager [s], formed on activation "
+                                                 "(topic bond, id the node's name); 0: no bond",
+                                            bounds=(0.0, 10.0))
     frame_id: str = option("earth_moon_rotating", "frame of state estimates and thrust")
     plan_file: str = option("", "nominal plan (solution JSON) adopted at the first estimate; "
                                 "empty: the bundled nominal of the scenario if any, else a cold "

@@ -20,6 +20,7 @@ from std_srvs.srv import Trigger
 
 from daddy_core.errors import DaddyError
 
+from . import bond
 from . import conversions as cv
 from . import interface as io
 from . import parameters
@@ -76,6 +77,7 @@ class GuidanceNode(LifecycleNode):
         self._active = False
         self._entities: list = []   # subscriptions and the service made at configure
         self.action: replan_action.ReplanActionServer | None = None
+        self.bond: bond.Bond | None = None
         self._configure_error = ""
         # outputs exist in every state: diagnostics always, the plan latched across deactivation,
         # thrust commands only while active (a lifecycle publisher)
@@ -160,7 +162,7 @@ class GuidanceNode(LifecycleNode):
             self.action = replan_action.ReplanActionServer(
                 self, lambda: self.session, lambda: self._active, lambda: self.frame_id)
         else:
-            self.diag(Level.WARN, Code.NO_ACTION,
+            self.diag(Level.WARN, Code.NOT_BUILT,
                       "the daddy_interfaces package is not built: no Replan action (the topic "
                       "and the service serve re-plans; make interfaces builds it)", {}, None)
         self.get_logger().info(f"daddy_guidance configured: scenario {self.planner.case.name}, "
@@ -169,13 +171,36 @@ class GuidanceNode(LifecycleNode):
 
     def on_activate(self, state: State) -> TransitionCallbackReturn:
         self._active = True
+        self._form_bond()
         self.get_logger().info("daddy_guidance ready: active")
         return super().on_activate(state)
 
     def on_deactivate(self, state: State) -> TransitionCallbackReturn:
         self._active = False
+        self._break_bond()
         self.get_logger().info("daddy_guidance inactive: no thrust commands, no re-plans")
         return super().on_deactivate(state)
+
+    def _form_bond(self) -> None:
+        """The bond with nav2's lifecycle manager (``bond``), as nav2's servers form it on
+        activation; ``bond_heartbeat_period_s`` 0: none."""
+        period = self._param("bond_heartbeat_period_s")
+        if period <= 0.0 or self.bond is not None:
+            return
+        if not bond.available():
+            self.diag(Level.WARN, Code.NOT_BUILT, "the bond message package is not built: no "
+                      "bond with a lifecycle manager (make interfaces builds it)", {}, None)
+            return
+        self.bond = bond.Bond(self, self.get_name(), period, self._bond_broken)
+
+    def _bond_broken(self, reason: str) -> None:
+        self.diag(Level.WARN, Code.BOND_BROKEN, f"bond broken: {reason}; guidance goes on",
+                  {"bond_id": self.get_name()}, None)
+
+    def _break_bond(self) -> None:
+        if self.bond is not None:
+            self.bond.destroy()
+            self.bond = None
 
     def on_cleanup(self, state: State) -> TransitionCallbackReturn:
         self._teardown()
@@ -191,6 +216,7 @@ class GuidanceNode(LifecycleNode):
     def _teardown(self) -> None:
         """Stop the worker and destroy what configure made. The planner object stays (a solve
         still finishing after the 5 s join may use it); the next configure builds a new one."""
+        self._break_bond()
         self.stop()
         for entity in self._entities:
             if isinstance(entity, Subscription):

@@ -61,7 +61,8 @@ class Code(str, Enum):
     FEEDBACK_LAW = "FEEDBACK_LAW"           # a stage's thrust from the plan's feedback law
     PLAN_DOES_NOT_FIT = "PLAN_DOES_NOT_FIT"  # the estimate is far from the plan: no thrust from it
     CANCELLED = "CANCELLED"                 # the re-plan was cancelled: plan kept
-    NO_ACTION = "NO_ACTION"                 # daddy_interfaces not built: no Replan action
+    NOT_BUILT = "NOT_BUILT"                 # an interface package is missing: no action / bond
+    BOND_BROKEN = "BOND_BROKEN"             # the lifecycle manager's bond broke: guidance goes on
     STAMP_JUMP = "STAMP_JUMP"               # an estimate's stamp far from the flight's clock
     CLOCK_CHANGED = "CLOCK_CHANGED"         # consistent estimates set a new flight clock
     INTERNAL_ERROR = "INTERNAL_ERROR"       # a bug: reported, the node goes on

@@ -1,4 +1,6 @@
-"""Build and install the daddy_interfaces package (the Replan action) into this Python's prefix.
+"""Build and install the node's interface packages into this Python's prefix: daddy_interfaces
+(the Replan action) and, where no ROS 2 bond package is importable, bond (the bond/msg/Status
+heartbeat nav2's lifecycle manager exchanges with its nodes, field for field as bond_core's).
 
     python interfaces/build.py            (make does this when it bootstraps .venv)
 
@@ -7,8 +9,8 @@ rosidl_default_generators) its generators are used; otherwise those of the regis
 Jazzy wheels installed in this prefix (requirements/interfaces.txt). The wheels were built on a
 manylinux image and their CMake exports name that image's Python include and site-packages
 directories; where those do not exist here they are pointed at this interpreter's (the only
-change made to installed files). A colcon workspace builds the package as any ament_cmake one:
-``colcon build --base-paths src src/daddy_ros/interfaces``.
+change made to installed files). A colcon workspace builds daddy_interfaces as any ament_cmake
+package: ``colcon build --base-paths src src/daddy_ros/interfaces/daddy_interfaces``.
 """
 from __future__ import annotations
 
@@ -20,7 +22,8 @@ import sysconfig
 from pathlib import Path
 
 HERE = Path(__file__).resolve().parent
-PACKAGE = HERE / "daddy_interfaces"
+# package directory -> the module that shows it is installed
+PACKAGES = {HERE / "bond": "bond.msg", HERE / "daddy_interfaces": "daddy_interfaces.action"}
 GENERATORS = "share/rosidl_default_generators/cmake/rosidl_default_generatorsConfig.cmake"
 # the wheels' build image: its include and site-packages directories, in their CMake exports
 WHEEL_BUILD_PATHS = {
@@ -57,35 +60,48 @@ def fix_wheel_exports(prefix: Path) -> int:
     return changed
 
 
-def main() -> int:
-    prefix = Path(sys.prefix)
-    prefixes = ament_prefixes()
-    if prefixes == [sys.prefix]:
-        fix_wheel_exports(prefix)
-    cmake = shutil.which("cmake", path=f"{prefix / 'bin'}{os.pathsep}{os.environ['PATH']}")
-    if cmake is None:
-        raise SystemExit("interfaces: cmake not found (requirements/interfaces.txt installs it)")
-    build = prefix / "build" / "daddy_interfaces"
+def imports(module: str) -> bool:
+    return subprocess.run([sys.executable, "-c", f"import {module}"],
+                          capture_output=True).returncode == 0
+
+
+def build(package: Path, prefixes: list[str], cmake: str) -> None:
+    """Configure, build and install one ament_cmake interface package into this prefix."""
+    prefix, out = Path(sys.prefix), Path(sys.prefix) / "build" / package.name
     env = dict(os.environ, AMENT_PREFIX_PATH=os.pathsep.join(prefixes),
                PATH=f"{Path(sys.executable).parent}{os.pathsep}{os.environ['PATH']}")
     steps = [
-        [cmake, "-S", str(PACKAGE), "-B", str(build), f"-DCMAKE_INSTALL_PREFIX={prefix}",
+        [cmake, "-S", str(package), "-B", str(out), f"-DCMAKE_INSTALL_PREFIX={prefix}",
          f"-DCMAKE_PREFIX_PATH={';'.join(prefixes)}", f"-DPython3_EXECUTABLE={sys.executable}",
          "-DBUILD_TESTING=OFF", "-DCMAKE_BUILD_TYPE=Release"],
-        [cmake, "--build", str(build), "-j", str(min(os.cpu_count() or 1, 4))],
-        [cmake, "--install", str(build)],
+        [cmake, "--build", str(out), "-j", str(min(os.cpu_count() or 1, 4))],
+        [cmake, "--install", str(out)],
     ]
     for cmd in steps:
         r = subprocess.run(cmd, env=env, capture_output=True, text=True)
         if r.returncode != 0:
             sys.stderr.write(r.stdout[-4000:] + r.stderr[-4000:])
-            raise SystemExit(f"interfaces: {' '.join(cmd[:2])} failed ({r.returncode})")
-    check = subprocess.run([sys.executable, "-c", "from daddy_interfaces.action import Replan"],
-                           capture_output=True, text=True)
-    if check.returncode != 0:
-        sys.stderr.write(check.stderr)
-        raise SystemExit("interfaces: built, but daddy_interfaces does not import")
-    print(f"interfaces: daddy_interfaces installed in {prefix}")
+            raise SystemExit(f"interfaces: {package.name}: {' '.join(cmd[:2])} failed "
+                             f"({r.returncode})")
+
+
+def main() -> int:
+    prefixes = ament_prefixes()
+    if prefixes == [sys.prefix]:
+        fix_wheel_exports(Path(sys.prefix))
+    cmake = shutil.which("cmake", path=f"{Path(sys.prefix) / 'bin'}{os.pathsep}"
+                                       f"{os.environ['PATH']}")
+    if cmake is None:
+        raise SystemExit("interfaces: cmake not found (requirements/interfaces.txt installs it)")
+    for package, module in PACKAGES.items():
+        if package.name == "bond" and imports(module) and not (
+                Path(sys.prefix) / "build" / "bond").exists():
+            print("interfaces: bond: the installed ROS 2 bond package is used")
+            continue
+        build(package, prefixes, cmake)
+        if not imports(module):
+            raise SystemExit(f"interfaces: {package.name} built, but {module} does not import")
+        print(f"interfaces: {package.name} installed in {sys.prefix}")
     return 0
 
 
