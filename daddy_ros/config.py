@@ -23,8 +23,8 @@ def bundled_plan(case_name: str, fuel_optimal: bool = True) -> Path | None:
 def option(default, description: str, runtime: bool = False, static: bool = False,
            bounds: tuple | None = None):
     """A dataclass field with its description and limits: a node parameter (here) or a field
-    of a campaign file (``campaigns``). ``runtime``: settable in every lifecycle state (the
-    others only while unconfigured); ``static``: read when the node is constructed, so never
+    of a campaign file (``campaigns``). ``runtime``: settable in every lifecycle state, in
+    flight too (``GuidanceSession.reconfigure``; the others only while unconfigured); ``static``: read when the node is constructed, so never
     settable afterwards (a read-only descriptor); ``bounds``: the (lowest, highest) value, a
     range in the descriptor that rclpy enforces and the campaign file's check."""
     return field(default=default, metadata={"description": description, "runtime": runtime,
@@ -37,8 +37,8 @@ class PlannerConfig:
     own)."""
 
     scenario: str = option("halo_l2_l1", "catalogue case name or path to a case .json file")
-    method: str = option("dyn", f"DDP method, one of {', '.join(METHODS)}")
-    polish: bool = option(True, "Newton polishing after each re-optimisation")
+    method: str = option("dyn", f"DDP method, one of {', '.join(METHODS)}", runtime=True)
+    polish: bool = option(True, "Newton polishing after each re-optimisation", runtime=True)
     fuel_optimal: bool = option(True, "fuel-optimal cost (else energy-optimal)")
     stages: int = option(0, "stage count of the scenario (0: the case's own)",
                          bounds=(0, 100_000))
@@ -50,23 +50,25 @@ class PlannerConfig:
                              bounds=(0.0, 1e9))
     tol_aul: float = option(0.0, "augmented-Lagrangian tolerance (0: the case's own for cold "
                                  "solves, 1e-5 for polished warm re-optimisations, which Newton "
-                                 "then takes to tol_newton)", bounds=(0.0, 1.0))
+                                 "then takes to tol_newton)", bounds=(0.0, 1.0), runtime=True)
     tol_newton: float = option(0.0, "Newton polishing tolerance (0: the case's own)",
-                               bounds=(0.0, 1.0))
+                               bounds=(0.0, 1.0), runtime=True)
     time_budget_s: float = option(60.0, "wall-clock budget of one re-optimisation [s]",
                                   runtime=True, bounds=(1e-3, 86_400.0))
     restore_first: bool = option(True, "restore feasibility of the warm start by Newton before "
                                        "DDP, so a re-optimisation stopped by its budget still "
-                                       "yields a feasible plan (and re-plans are faster)")
+                                       "yields a feasible plan (and re-plans are faster)",
+                                       runtime=True)
     arrival_tolerance_m: float = option(0.0, "in the arrival phase (the last re-gridded stages) "
                                              "the terminal position may be this far from the "
                                              "target, the velocity stays exact [m]; 0: position "
-                                             "exact too", bounds=(0.0, 1e9))
+                                             "exact too", bounds=(0.0, 1e9), runtime=True)
     thrust_margin: float = option(0.05, "fraction of the thrust rating plans hold back for "
                                         "closed-loop corrections; a re-optimisation gives it up "
                                         "in steps (with 0.05: 95, 97, 98.5, 100 % of the "
                                         "rating) only when the target is out of reach "
-                                        "otherwise; 0: the full rating", bounds=(0.0, 0.99))
+                                        "otherwise; 0: the full rating", bounds=(0.0, 0.99),
+                                        runtime=True)
     staleness_s: float = option(600.0, "estimates older than this relative to the request are "
                                        "rejected [s]", runtime=True, bounds=(1e-3, 1e9))
     fit_position_m: float = option(1e7, "thrust is commanded from a plan only for an "
@@ -74,18 +76,18 @@ class PlannerConfig:
                                           "predicted state at its stamp; else the command is "
                                           "withheld and the node re-plans from the estimate "
                                           "(PLAN_DOES_NOT_FIT) [m] (0: no position test)",
-                                   bounds=(0.0, 1e12))
+                                   bounds=(0.0, 1e12), runtime=True)
     fit_velocity_m_s: float = option(100.0, "... and within this speed of it [m/s] (0: no "
-                                          "velocity test)", bounds=(0.0, 1e6))
+                                          "velocity test)", bounds=(0.0, 1e6), runtime=True)
     max_stamp_jump_stages: float = option(10.0, "a state estimate stamped more than this many "
                                                 "of the plan's longest stages from the newest "
                                                 "accepted one is rejected (STAMP_JUMP) and "
                                                 "changes nothing (0: no test)",
-                                          bounds=(0.0, 1e9))
+                                          bounds=(0.0, 1e9), runtime=True)
     stamp_jump_confirmations: int = option(3, "... unless this many estimates in a row agree "
                                               "on the new clock: the last sets it, and the node "
                                               "re-plans from it (CLOCK_CHANGED)",
-                                           bounds=(1, 1000))
+                                           bounds=(1, 1000), runtime=True)
     # a mass estimate may exceed the wet mass by this [kg] (not a node parameter)
     mass_tolerance_kg: float = 1e-6
 
@@ -104,29 +106,31 @@ class TriggerConfig:
     estimate of the arrival phase. 0 turns a rule off."""
 
     self_replan: bool = option(True, "re-plan by itself (stage boundaries, drift, arrival "
-                                     "phase); false: only on requests")
+                                     "phase); false: only on requests", runtime=True)
     replan_every_stages: int = option(1, "re-plan at every n-th stage boundary of the "
                                          "transfer's nominal grid (0: never)",
-                                      bounds=(0, 100_000))
+                                      bounds=(0, 100_000), runtime=True)
     trigger_position_m: float = option(5000.0, "re-plan when the estimate drifts this far from "
                                                "the predicted flight of the schedule in force "
-                                               "[m] (0: no position test)", bounds=(0.0, 1e12))
+                                               "[m] (0: no position test)", bounds=(0.0, 1e12),
+                                               runtime=True)
     trigger_velocity_m_s: float = option(0.05, "... or this fast [m/s] (0: no velocity test)",
-                                         bounds=(0.0, 1e6))
+                                         bounds=(0.0, 1e6), runtime=True)
     arrival_stages: int = option(2, "the arrival phase: the last n nominal stages, where every "
-                                    "estimate re-plans (0: none)", bounds=(0, 100_000))
+                                    "estimate re-plans (0: none)", bounds=(0, 100_000),
+                                    runtime=True)
     arrival_min_step: float = option(1 / 256, "... until less than this fraction of a nominal "
                                               "stage remains (the last open-loop interval)",
-                                     bounds=(0.0, 1.0))
+                                     bounds=(0.0, 1.0), runtime=True)
     feedback_order: int = option(1, "at a stage-boundary re-plan, fly the plan's feedback law "
                                     "of this order instead where the estimate is near the plan "
                                     "(feedback_position_m, feedback_velocity_m_s; 0: always "
-                                    "re-plan; docs/policies.md)", bounds=(0, 1))
+                                    "re-plan; docs/policies.md)", bounds=(0, 1), runtime=True)
     feedback_position_m: float = option(20000.0, "a feedback law is flown only within this "
                                                 "distance of the plan's state [m]",
-                                        bounds=(0.0, 1e9))
+                                        bounds=(0.0, 1e9), runtime=True)
     feedback_velocity_m_s: float = option(0.2, "... and within this speed of it [m/s]",
-                                          bounds=(0.0, 1e9))
+                                          bounds=(0.0, 1e9), runtime=True)
 
 
 @dataclass(frozen=True)

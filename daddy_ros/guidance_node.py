@@ -14,6 +14,7 @@ from geometry_msgs.msg import InertiaStamped
 from nav_msgs.msg import Odometry
 from rclpy.callback_groups import MutuallyExclusiveCallbackGroup, ReentrantCallbackGroup
 from rclpy.lifecycle import LifecycleNode, State, TransitionCallbackReturn
+from rcl_interfaces.msg import SetParametersResult
 from rclpy.subscription import Subscription
 from std_msgs.msg import Header
 from std_srvs.srv import Trigger
@@ -130,10 +131,14 @@ class GuidanceNode(LifecycleNode):
         return 0 if self.session is None else self.session.queue.coalesced
 
     # ------------------------------------------------------------------ lifecycle
+    def _config(self, cls, changes: dict | None = None):
+        """A settings dataclass of ``config`` from the parameters (``changes``: new values)."""
+        changes = changes or {}
+        return cls(**{f: changes[f] if f in changes else self._param(f)
+                      for f in cls.__dataclass_fields__ if self.has_parameter(f)})
+
     def on_configure(self, state: State) -> TransitionCallbackReturn:
-        def config(cls):
-            return cls(**{f: self._param(f) for f in cls.__dataclass_fields__
-                          if self.has_parameter(f)})
+        config = self._config
         try:
             self.planner = GuidancePlanner(config=config(PlannerConfig))
         except DaddyError as exc:
@@ -236,15 +241,20 @@ class GuidanceNode(LifecycleNode):
         return str(p) if p is not None and same else ""
 
     def _on_set_parameters(self, params):
-        """Runtime updates (``parameters.verdict``); a rejected update changes nothing."""
+        """Updates (``parameters.verdict``); a rejected update changes nothing. While
+        configured, the ``runtime`` parameters go to the session (``reconfigure``: the
+        estimates' tests at once, the solver's settings at the next re-plan)."""
         result = parameters.verdict(params, self.has_parameter, self.session is not None)
+        if result.successful and self.session is not None:
+            changes = {p.name: p.value for p in params if p.name in parameters.RUNTIME}
+            try:
+                self.session.reconfigure(changes, self._config(TriggerConfig, changes))
+            except DaddyError as exc:
+                result = SetParametersResult(successful=False, reason=str(exc))
         if not result.successful:
             self.diag(Level.WARN, Code.PARAMETER_REJECTED,
                        f"parameter update rejected: {result.reason}", {"field": "parameters"},
                        None)
-        elif self.session is not None:
-            self.planner.update(**{p.name: p.value for p in params
-                                   if p.name in parameters.RUNTIME})
         return result
 
     # ------------------------------------------------------------------ inputs

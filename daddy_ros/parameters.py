@@ -11,11 +11,13 @@ from rclpy.exceptions import InvalidParameterTypeException, InvalidParameterValu
 
 from daddy_core.catalogue import list_cases, load_thrust_case
 from daddy_core.errors import DaddyError
+from daddy_core.solver import METHODS
 
 from .config import Parameter, parameters
 
 NAMES = {p.name for p in parameters()}
-RUNTIME = {p.name for p in parameters() if p.runtime}   # time_budget_s, staleness_s
+RUNTIME = {p.name for p in parameters() if p.runtime}   # settable while configured
+DEFAULTS = {p.name: p.default for p in parameters()}
 
 
 def descriptor(p: Parameter) -> ParameterDescriptor:
@@ -47,11 +49,17 @@ def declare(node, overrides: dict) -> None:
 
 def problem(p, has_parameter, configured: bool) -> str:
     """Why the update of parameter ``p`` is refused ('' when it is not): the ``runtime`` ones
-    (positive finite floats) in every state, every other declared one only while unconfigured
-    (configure reads them); an unknown scenario always."""
+    in every state (a value of their type, finite; their ranges rclpy checks), every other
+    declared one only while unconfigured (configure reads them: they shape the problem or the
+    node's interface); an unknown scenario or method always."""
     if p.name in RUNTIME:
-        if not (isinstance(p.value, float) and math.isfinite(p.value) and p.value > 0):
-            return f"{p.name} must be a positive finite float, got {p.value!r}"
+        kind = type(DEFAULTS[p.name])
+        if type(p.value) is not kind:
+            return f"{p.name} must be a {kind.__name__}, got {p.value!r}"
+        if kind is float and not math.isfinite(p.value):
+            return f"{p.name} must be finite, got {p.value!r}"
+        if p.name == "method" and p.value not in METHODS:
+            return f"method {p.value!r} is unknown (known: {', '.join(METHODS)})"
         return ""
     if p.name == "scenario" and isinstance(p.value, str):
         try:
@@ -62,7 +70,8 @@ def problem(p, has_parameter, configured: bool) -> str:
             return (f"scenario {p.value!r} is unknown (known: {', '.join(list_cases())}); "
                     "scenario is also read-only once configured")
     if p.name in NAMES and has_parameter(p.name) and configured:
-        return f"{p.name} is read-only once configured (clean the node up to change it)"
+        return (f"{p.name} is read-only once configured: it shapes the problem or the node's "
+                "interface (clean the node up to change it)")
     return ""
 
 

@@ -36,6 +36,9 @@ from .replan_policy import LADDER_MIN_GAIN, ReplanPolicy, margin_ratings
 from .shift import MIN_STAGES_LEFT, Shifted, shift_plan
 
 
+# the settings the solver options of each kind of re-plan are made of (``ReplanPolicy.of``)
+POLICY_SETTINGS = ("tol_aul", "tol_newton", "time_budget_s", "polish", "restore_first")
+
 # a solve started with less than this left of the re-plan's budget gets this much (the
 # solver's own clock needs a positive budget; a re-plan may overrun by it)
 MIN_SOLVE_BUDGET_S = 1e-3
@@ -80,16 +83,21 @@ class GuidancePlanner:
                              "guidance")
         self.units = self.case.units
         self.grid = grid_of(self.case)   # where an estimate lies on the stages (time or angle)
-        self.rated_problems = [
-            problem_from_case(self.case, stages=cfg.stages or None, max_thrust_n=rating,
-                              r_min_km=cfg.r_min_km or None)
-            for rating in margin_ratings(self.case.spacecraft.max_thrust_n, cfg.thrust_margin)]
+        self.rated_problems = self._ratings(cfg)
         self.base_problem = self.rated_problems[0]
         self.policy = ReplanPolicy.of(self.case, cfg)
         self.checks = EstimateChecks(self.case, cfg.staleness_s, cfg.mass_tolerance_kg)
         self._lock = threading.Lock()
         self._plan: Plan | None = None
+        self._changes: dict = {}   # settings changed in flight, for the next re-plan
         preload()   # the first re-plan must not pay scipy's import (~0.5 s)
+
+    def _ratings(self, cfg: PlannerConfig) -> list[Problem]:
+        """The problem at each rung of the thrust-margin ladder, lowest rating first."""
+        return [problem_from_case(self.case, stages=cfg.stages or None, max_thrust_n=rating,
+                                  r_min_km=cfg.r_min_km or None)
+                for rating in margin_ratings(self.case.spacecraft.max_thrust_n,
+                                             cfg.thrust_margin)]
 
     @property
     def method(self) -> str:
@@ -99,15 +107,37 @@ class GuidancePlanner:
     def time_budget_s(self) -> float:
         return self.config.time_budget_s
 
-    def update(self, time_budget_s: float | None = None, staleness_s: float | None = None):
-        """Change the settings that may change at run time (``config.parameters`` marks them)."""
+    def update(self, **changes) -> None:
+        """Change settings in flight (``config``: the ``runtime`` parameters): the estimates'
+        staleness test at once, the solver's settings and the thrust-margin ladder from the next
+        re-plan on (the one running keeps its own). A DaddyError, and nothing changed, when the
+        settings are not valid together."""
         with self._lock:
-            if time_budget_s is not None:
-                self.config = replace(self.config, time_budget_s=time_budget_s)
-                self.policy = self.policy.with_time_budget(time_budget_s)
-            if staleness_s is not None:
-                self.config = replace(self.config, staleness_s=staleness_s)
-                self.checks.staleness_s = staleness_s
+            replace(self.config, **self._changes, **changes)   # (validated now, applied later)
+            self._changes = {**self._changes, **changes}
+            if "staleness_s" in changes:
+                self.checks.staleness_s = changes["staleness_s"]
+
+    def changed_config(self) -> PlannerConfig:
+        """The settings with the changes the next re-plan applies."""
+        with self._lock:
+            return replace(self.config, **self._changes)
+
+    def _apply_changes(self) -> None:
+        """(at the start of a re-plan) The settings changed since the last one."""
+        with self._lock:
+            changes, self._changes = self._changes, {}
+        if not changes:
+            return
+        old, cfg = self.config, replace(self.config, **changes)
+        if cfg.thrust_margin != old.thrust_margin:
+            self.rated_problems = self._ratings(cfg)
+            self.base_problem = self.rated_problems[0]
+        if any(getattr(cfg, k) != getattr(old, k) for k in POLICY_SETTINGS):
+            # (the warm homotopy step a loaded plan set is kept: ``load_plan``)
+            self.policy = ReplanPolicy.of(self.case, cfg).with_warm(
+                homotopy=self.policy.warm.homotopy)
+        self.config = cfg
 
     # ------------------------------------------------------------------ plan access
     @property
@@ -140,6 +170,7 @@ class GuidancePlanner:
         progress lines (``daddy_core.solver.progress.ProgressLine``).
         """
         x0 = self.checks.check_state(pos_m, vel_m_s, mass_kg, stamp_s, now_s)
+        self._apply_changes()
         plan = None if cold else self.plan   # read once: another thread may adopt a plan
         shifted = self.shift(plan, stamp_s, x0)
         warm = shifted.start is not None

@@ -92,11 +92,6 @@ class ReplanPolicy:
             return self.cold
         return self.arrival if arrival else self.warm
 
-    def with_time_budget(self, time_budget_s: float) -> "ReplanPolicy":
-        """Every kind of solve with another wall-clock budget."""
-        return replace(self, **{k: getattr(self, k).with_(run=dict(time_budget_s=time_budget_s))
-                                for k in ("cold", "warm", "arrival")})
-
     def with_warm(self, **options) -> "ReplanPolicy":
         """Warm re-plans (arrival phase included) with other solver options, as
         ``SolverOptions.with_`` takes them (experiments)."""

@@ -20,6 +20,7 @@ import numpy as np
 from daddy_core.errors import DaddyError
 
 from .checks import InputRejected, StampGuard
+from .config import PlannerConfig, TriggerConfig
 from .feedback import FeedbackLaws
 from .plan import Code, Level, Plan
 from .plan_fit import PlanFit
@@ -167,6 +168,31 @@ class GuidanceSession:
     def request(self, request_id: str, stamp: float | None) -> str:
         """Queue a re-plan request; returns the id that will serve it."""
         return self.queue.enqueue(request_id, stamp)
+
+    def reconfigure(self, changes: dict, settings: TriggerConfig) -> None:
+        """Parameters changed while configured (``config``: the runtime ones): the planner's
+        (``GuidancePlanner.update``: the staleness test at once, the solver's settings at the
+        next re-plan), the plan-fit and stamp tests at the next estimate, and the re-plan policy
+        and feedback laws from ``settings`` at the next estimate (their prediction kept).
+        A DaddyError, and nothing changed, when the planner refuses them."""
+        planner = {k: v for k, v in changes.items() if k in PlannerConfig.__dataclass_fields__}
+        if planner:
+            self.planner.update(**planner)
+        cfg = self.planner.changed_config()
+        self.fit = PlanFit(self.planner.case, cfg.fit_position_m, cfg.fit_velocity_m_s)
+        self.stamps.stages = cfg.max_stamp_jump_stages
+        self.stamps.confirmations = cfg.stamp_jump_confirmations
+        if not any(k in TriggerConfig.__dataclass_fields__ for k in changes):
+            return
+        if self.trigger is not None and settings.self_replan:
+            self.trigger.settings = settings   # (its prediction of the schedule is kept)
+        else:
+            self.trigger = ReplanTrigger.for_planner(self.planner, settings)
+        if self.laws is not None and self.laws.order == settings.feedback_order:
+            self.laws.position_m = settings.feedback_position_m   # (the built laws are kept)
+            self.laws.velocity_m_s = settings.feedback_velocity_m_s
+        else:   # (built for the plan in force when first served)
+            self.laws = FeedbackLaws.for_planner(self.planner, settings)
 
     def request_goal(self, request_id: str, stamp: float | None, cold: bool,
                      time_budget_s: float | None) -> int:

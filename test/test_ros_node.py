@@ -375,6 +375,57 @@ def test_parameter_descriptors_carry_read_only_flags_and_ranges(graph):
         GuidanceNode(namespace="/bad", scenario="earth_mars", frame_id=FRAME, thrust_margin=2.0)
 
 
+def test_settings_change_in_flight_at_the_next_estimate_or_re_plan_and_the_rest_are_refused(
+        graph):
+    """Issue 49 item 5: every setting that can safely change while active can (the re-plan
+    policy, the estimate tests, the solver's settings, the thrust margin, the budget): the
+    estimate-side ones apply at once, the solver's at the next re-plan (not the one running);
+    the settings that shape the problem or the interface are refused with the reason."""
+    from rclpy.parameter import Parameter
+
+    from daddy_ros.config import bundled_plan
+    node = GuidanceNode(namespace="/inflight", scenario="earth_mars", frame_id=FRAME,
+                        time_budget_s=60.0)
+    try:
+        assert node.lifecycle_state == "active"
+        new = {"trigger_position_m": 1234.0, "replan_every_stages": 3, "arrival_stages": 4,
+               "feedback_position_m": 5000.0, "fit_position_m": 2e6, "max_stamp_jump_stages": 4.0,
+               "stamp_jump_confirmations": 5, "staleness_s": 100.0, "thrust_margin": 0.1,
+               "time_budget_s": 30.0, "tol_aul": 1e-7, "method": "hess", "polish": False}
+        results = node.set_parameters([Parameter(k, value=v) for k, v in new.items()])
+        assert all(r.successful for r in results), [r.reason for r in results]
+        s = node.session
+        # the estimates' tests and the re-plan policy: at once (the policy's prediction kept)
+        assert s.trigger.settings.trigger_position_m == 1234.0
+        assert s.trigger.settings.replan_every_stages == 3 and s.trigger.settings.arrival_stages == 4
+        assert s.laws.position_m == 5000.0 and s.fit.position_m == 2e6
+        assert (s.stamps.stages, s.stamps.confirmations) == (4.0, 5)
+        assert node.planner.checks.staleness_s == 100.0
+        # the solver's settings: from the next re-plan on
+        assert node.planner.config.thrust_margin == 0.05 and node.planner.method == "dyn"
+        pos, vel, mass = truth_at_start()
+        node.planner.load_plan(bundled_plan("earth_mars"), T0)
+        out = node.planner.replan(pos, vel, mass, T0, "after-the-change")
+        assert out.ok, out.reason
+        cfg = node.planner.config
+        assert (cfg.thrust_margin, cfg.time_budget_s, cfg.tol_aul, cfg.method, cfg.polish) == (
+            0.1, 30.0, 1e-7, "hess", False)
+        rating = node.planner.case.spacecraft.max_thrust_n
+        assert float(node.planner.base_problem.u_max) == pytest.approx(
+            float(node.planner.units.thrust(0.9 * rating)))
+        assert node.planner.policy.warm.aul.tol == 1e-7
+        # what shapes the problem or the interface: refused while configured, with the reason
+        for name, value in (("stages", 10), ("scenario", "halo_l2_l1"), ("fuel_optimal", False),
+                            ("frame_id", "map"), ("state_topic", "elsewhere")):
+            r = node.set_parameters([Parameter(name, value=value)])[0]
+            assert not r.successful and "read-only once configured" in r.reason, (name, r)
+        r = node.set_parameters([Parameter("method", value="newton")])[0]
+        assert not r.successful and "method 'newton' is unknown" in r.reason
+    finally:
+        node.trigger_shutdown()
+        node.destroy_node()
+
+
 def test_recording_writes_every_topic_and_a_schedule_round_trips(graph, tmp_path):
     """McapRecorder (gnc_demo --record) on the node's interface topics: every topic of a short
     session is in the file with its ros2msg schema, the file decodes with the standard MCAP
