@@ -55,6 +55,9 @@ class DirectLink:
         plan = self.planner.plan
         return plan.thrust_at(t_s) if plan else np.zeros(3)
 
+    def truth(self, pos, vel, mass, t_s) -> None:
+        """The simulator's true state (in-process: nobody to tell)."""
+
     def stage_starts(self) -> np.ndarray:
         plan = self.planner.plan
         return plan.start_times_s if plan else np.zeros(0)
@@ -95,6 +98,7 @@ def fly(link, sim: TruthSim, planner: GuidancePlanner, policy: TriggerConfig, su
     dt_stage = sim.tof_s / N
     latencies, levels, flown, thrust_log = [], [], [sim.truth_si()[0]], []
     triggered = 0
+    link.truth(*sim.truth_si(), sim.t_s)
     link.estimate(*sim.estimate_si(), sim.t_s, "start")   # starts the policy's prediction
     for j, (t0, t1) in enumerate(flight_steps(
             sim.t_s, N, dt_stage, substeps, policy.arrival_stages,
@@ -116,6 +120,7 @@ def fly(link, sim: TruthSim, planner: GuidancePlanner, policy: TriggerConfig, su
             thrust = link.thrust_at(a, pos, vel, mass)
             applied = sim.apply(thrust, b - a)
             thrust_log.append((a, float(np.linalg.norm(applied))))
+            link.truth(*sim.truth_si(), sim.t_s)
         flown.append(sim.truth_si()[0])
     miss_r, miss_v = sim.miss()
     m_final = sim.truth_si()[2]

@@ -38,9 +38,22 @@ _LEVEL_OF = {0: Level.OK, 1: Level.WARN, 2: Level.ERROR}   # DiagnosticStatus le
 SELF_REPLAN_HINT_S = 0.02
 
 
+def truth_topics() -> dict:
+    """The simulator's true state, published beside the node's topics (and recorded):
+    {topic: (message class, QoS)}; the state as ``nav_msgs/Odometry`` in the node's frame
+    (position m, velocity m/s, as the estimates), the mass as ``geometry_msgs/InertiaStamped``
+    [kg], stamped with the simulation's time after every flown piece."""
+    from geometry_msgs.msg import InertiaStamped
+    from nav_msgs.msg import Odometry
+
+    from daddy_ros.interface import RELIABLE
+    return {"/truth/state": (Odometry, RELIABLE), "/truth/mass": (InertiaStamped, RELIABLE)}
+
+
 class RosLink:
     """Guidance over ROS 2 topics (``client.GuidanceClient``): the GNC side of the loop
-    (estimates out; thrust commands, schedules and diagnostics in)."""
+    (estimates and the simulator's truth out; thrust commands, schedules and diagnostics
+    in)."""
 
     def __init__(self, frame_id: str, timeout_s: float):
         from daddy_ros.client import GuidanceClient
@@ -48,8 +61,24 @@ class RosLink:
         self._stamp_s = stamp_to_s
         self.client = GuidanceClient(frame_id, name="daddy_gnc_sim")
         self.node = self.client.node
+        self.frame_id = frame_id
         self.timeout_s = timeout_s
         self.served: list = []   # stage boundaries the node served by a feedback law
+        (state, qos), (mass, qos_m) = truth_topics().values()
+        self._truth_state = self.node.create_publisher(state, "/truth/state", qos)
+        self._truth_mass = self.node.create_publisher(mass, "/truth/mass", qos_m)
+
+    def truth(self, pos, vel, mass, t_s) -> None:
+        """Publish the simulator's true state (``truth_topics``)."""
+        from geometry_msgs.msg import InertiaStamped
+
+        from daddy_ros import conversions as cv
+        msg = cv.state_to_odometry(pos, vel, t_s, self.frame_id)
+        self._truth_state.publish(msg)
+        m = InertiaStamped()
+        m.header.stamp, m.header.frame_id, m.inertia.m = cv.s_to_stamp(t_s), self.frame_id, \
+            float(mass)
+        self._truth_mass.publish(m)
 
     def publish_estimate(self, pos, vel, mass, t_s):
         self.client.publish_estimate(pos, vel, mass, t_s)
@@ -255,7 +284,7 @@ def _ros_demo(args, config: CampaignConfig, planner, header: Header) -> int:
     recorder = None
     if args.record:   # before anything is published: the recorder sees the whole run
         from .recording import McapRecorder
-        recorder = McapRecorder(args.record, guidance.interface_topics())
+        recorder = McapRecorder(args.record, {**guidance.interface_topics(), **truth_topics()})
     guidance.adopt_plan(planner.plan)            # the nominal plan, anchored at T0
     link = RosLink(guidance.frame_id, timeout_s=3 * args.time_budget + 30)
     spinner = SpinThread(guidance)

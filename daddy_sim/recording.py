@@ -5,10 +5,14 @@ readable by ``ros2 bag``, Foxglove and the ``mcap`` tools).
 bytes as they crossed the middleware, no deserialisation) and writes each message with its
 topic's ``ros2msg`` schema -- the message definition with its dependencies, assembled from the
 ``.msg`` files of the installed message packages (``message_definition``), as rosbag2 does.
+Each channel carries its topic's QoS as rosbag2's ``offered_qos_profiles`` (``qos_yaml``), so
+``ros2 bag play`` offers the latched plan topics transient local again and a late subscriber
+gets the plan; a ``rosbag2`` metadata record names the ROS distribution.
 Needs the ``record`` extra (``mcap``; ``mcap-ros2-support`` to decode a file in Python).
 """
 from __future__ import annotations
 
+import os
 import re
 import sys
 import threading
@@ -82,6 +86,27 @@ def message_definition(msg_type) -> str:
     return "\n".join(parts) + "\n"
 
 
+def qos_yaml(qos) -> str:
+    """rosbag2's ``offered_qos_profiles`` of one publisher with the rclpy QoS profile ``qos``:
+    a YAML list of one profile, policies as rmw's enum numbers (the form rosbag2 reads from an
+    MCAP file whose ``rosbag2`` metadata record has no ``serialized_metadata``: every
+    distribution since Humble reads it), durations as sec / nsec."""
+    def duration(d) -> str:
+        ns = d.nanoseconds
+        return f"\n    sec: {ns // 1_000_000_000}\n    nsec: {ns % 1_000_000_000}"
+
+    return (f"- history: {int(qos.history.value)}\n"
+            f"  depth: {int(qos.depth)}\n"
+            f"  reliability: {int(qos.reliability.value)}\n"
+            f"  durability: {int(qos.durability.value)}\n"
+            f"  deadline:{duration(qos.deadline)}\n"
+            f"  lifespan:{duration(qos.lifespan)}\n"
+            f"  liveliness: {int(qos.liveliness.value)}\n"
+            f"  liveliness_lease_duration:{duration(qos.liveliness_lease_duration)}\n"
+            f"  avoid_ros_namespace_conventions: "
+            f"{'true' if qos.avoid_ros_namespace_conventions else 'false'}\n")
+
+
 class McapRecorder:
     """Record topics of the ROS graph into an MCAP file until ``close()``.
 
@@ -103,6 +128,8 @@ class McapRecorder:
         self._file = open(self.path, "wb")
         self._writer = Writer(self._file, compression=CompressionType.ZSTD)
         self._writer.start(profile="ros2", library="daddy")
+        self._writer.add_metadata("rosbag2", {"ROS_DISTRO": os.environ.get("ROS_DISTRO",
+                                                                           "jazzy")})
         self._lock = threading.Lock()
         self.counts: dict[str, int] = {}
         self.node = Node(node_name)
@@ -111,8 +138,9 @@ class McapRecorder:
                 name=type_name(msg_type), encoding="ros2msg",
                 data=message_definition(msg_type).encode())
             resolved = self.node.resolve_topic_name(topic)
-            channel = self._writer.register_channel(topic=resolved, message_encoding="cdr",
-                                                    schema_id=schema)
+            channel = self._writer.register_channel(
+                topic=resolved, message_encoding="cdr", schema_id=schema,
+                metadata={"offered_qos_profiles": qos_yaml(qos)})
             self.counts[resolved] = 0
             self.node.create_subscription(
                 msg_type, topic, lambda data, c=channel, t=resolved: self._write(c, t, data),

@@ -427,17 +427,23 @@ def test_settings_change_in_flight_at_the_next_estimate_or_re_plan_and_the_rest_
 
 
 def test_recording_writes_every_topic_and_a_schedule_round_trips(graph, tmp_path):
-    """McapRecorder (gnc_demo --record) on the node's interface topics: every topic of a short
-    session is in the file with its ros2msg schema, the file decodes with the standard MCAP
-    ROS 2 decoder, and the recorded schedule is the one the client received."""
+    """McapRecorder (gnc_demo --record) on the node's interface topics and the simulator's
+    truth: every topic of a short session is in the file with its ros2msg schema and its QoS
+    as rosbag2's offered_qos_profiles (the latched plan topics transient local, so ``ros2 bag
+    play`` re-latches them), the file decodes with the standard MCAP ROS 2 decoder, the
+    recorded schedule is the one the client received and the truth the one published."""
     pytest.importorskip("mcap_ros2", reason="the record extra (make test installs it)")
+    yaml = pytest.importorskip("yaml")
     from mcap.reader import make_reader
     from mcap_ros2.decoder import DecoderFactory
 
+    from daddy_sim.demo import RosLink, truth_topics
     from daddy_sim.recording import McapRecorder
     node, c = graph
     path = tmp_path / "run.mcap"
-    rec = McapRecorder(path, node.interface_topics(), node_name="daddy_test_recorder")
+    rec = McapRecorder(path, {**node.interface_topics(), **truth_topics()},
+                       node_name="daddy_test_recorder")
+    sim_link = RosLink(FRAME, timeout_s=10.0)
     end = time.monotonic() + 15
     while time.monotonic() < end and rec.node.count_publishers("/state_estimate") == 0:
         time.sleep(0.05)
@@ -452,20 +458,40 @@ def test_recording_writes_every_topic_and_a_schedule_round_trips(graph, tmp_path
     c.request("recorded", t)
     assert c.wait_for(lambda: c.status_for("recorded"), 60)
     assert c.wait_for(lambda: len(c.schedules) > n_sched, 15)
+    end = time.monotonic() + 15
+    while time.monotonic() < end and not rec.counts["/truth/state"]:
+        sim_link.truth(pos, vel, mass, t)
+        time.sleep(0.2)
     time.sleep(0.5)   # the last messages reach the recorder too
     counts = rec.close()
+    sim_link.close()
     for topic in ("/state_estimate", "/mass_estimate", "/replan_request", "/control_schedule",
-                  "/planned_path", "/thrust_command", "/diagnostics"):
+                  "/planned_path", "/thrust_command", "/diagnostics", "/truth/state",
+                  "/truth/mass"):
         assert counts[topic] > 0, f"nothing recorded on {topic}: {counts}"
-    seen, last_schedule = {}, None
+    seen, last_schedule, truth = {}, None, None
     with open(path, "rb") as f:
-        for schema, channel, message, decoded in make_reader(
-                f, decoder_factories=[DecoderFactory()]).iter_decoded_messages():
+        reader = make_reader(f, decoder_factories=[DecoderFactory()])
+        summary = reader.get_summary()
+        qos = {ch.topic: yaml.safe_load(ch.metadata["offered_qos_profiles"])[0]
+               for ch in summary.channels.values()}
+        distro = [m for m in reader.iter_metadata() if m.name == "rosbag2"]
+        for schema, channel, message, decoded in reader.iter_decoded_messages():
             seen[channel.topic] = seen.get(channel.topic, 0) + 1
             assert schema.encoding == "ros2msg" and channel.message_encoding == "cdr"
             if channel.topic == "/control_schedule":
                 last_schedule = decoded
+            if channel.topic == "/truth/state":
+                truth = decoded
     assert seen == counts
+    # rmw's numbers: reliability 1 reliable / 2 best effort; durability 1 transient local
+    for topic in ("/control_schedule", "/planned_path"):
+        assert (qos[topic]["reliability"], qos[topic]["durability"], qos[topic]["depth"]) == (
+            1, 1, 1), (topic, qos[topic])
+    assert qos["/state_estimate"]["reliability"] == 2 and qos["/thrust_command"]["durability"] == 2
+    assert distro and "ROS_DISTRO" in distro[0].metadata
+    p = truth.pose.pose.position
+    np.testing.assert_allclose([p.x, p.y, p.z], pos, rtol=1e-12)
     starts, u = cv.joint_trajectory_to_schedule(c.schedules[-1][1])
     assert list(last_schedule.joint_names) == ["thrust_x", "thrust_y", "thrust_z"]
     rec_u = np.array([list(p.effort) for p in last_schedule.points])
