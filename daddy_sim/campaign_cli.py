@@ -25,7 +25,8 @@ from pathlib import Path
 from .campaign_executors import Executor, check_executor, open_executor
 from .campaign_results import (Header, Results, ResultsWriter, format_summary, merge_results,
                                package_version, read_results, summarise)
-from .campaigns import CampaignConfig, CampaignError, check_case, load_config, run_campaign
+from .campaigns import (CampaignConfig, CampaignError, check_case, load_config,
+                        read_config_data, run_campaign)
 
 
 def open_loop_header(config: CampaignConfig) -> Header:
@@ -67,11 +68,15 @@ def _duration(s: float) -> str:
 
 def _config_from_args(args, base: CampaignConfig | None = None) -> CampaignConfig:
     """The campaign file (else ``base``, else the defaults) with the command line's case and
-    seeds."""
+    seeds; the case's own defaults (its ``closed_loop`` section) fill what the file leaves
+    out."""
     config = load_config(args.config) if args.config else (base or CampaignConfig())
     if args.case:
         check_case(args.case, "--case")
-        config = replace(config, case=args.case)
+        data = read_config_data(args.config) if args.config else (
+            base.to_dict() if base else {})
+        config = CampaignConfig.from_dict({**data, "case": args.case},
+                                          where=args.config or "--case")
     if args.runs is not None or args.first_seed is not None:
         first = args.first_seed if args.first_seed is not None else config.seeds[0]
         count = args.runs if args.runs is not None else len(config.seeds)

@@ -178,20 +178,36 @@ class CampaignConfig:
         for key in data:
             if key not in known:
                 raise CampaignError(f"{where}.{key}: unknown field (known: {', '.join(known)})")
-        kw = {name: _section(sec, data[name], f"{where}.{name}")
-              for name, sec in _SECTIONS.items() if name in data}
+        case = data.get("case", cls.case)
+        check_case(case, f"{where}.case")
+        mission = load_case(case).closed_loop   # the case's own defaults of some sections
+        for name in mission:
+            if name not in _SECTIONS:
+                raise CampaignError(f"case {case!r}: closed_loop.{name}: unknown section "
+                                    f"(known: {', '.join(_SECTIONS)})")
+        kw = {}
+        for name, sec in _SECTIONS.items():
+            given = data.get(name, {})
+            if not isinstance(given, dict):
+                raise CampaignError(f"{where}.{name}: expected a mapping, got "
+                                    f"{type(given).__name__}")
+            if name in mission:   # the case's values, each field the file gives overriding
+                _section(sec, mission[name], f"case {case!r}: closed_loop.{name}")
+            if name in data or name in mission:
+                kw[name] = _section(sec, {**mission.get(name, {}), **given}, f"{where}.{name}")
         if "seeds" in data:
             kw["seeds"] = _seeds_from_data(data["seeds"], f"{where}.seeds")
-        if "case" in data:
-            kw["case"] = data["case"]
-        config = cls(**kw)
-        check_case(config.case, f"{where}.case")
-        return config
+        return cls(case=case, **kw)
 
 
 def load_config(path) -> CampaignConfig:
     """A campaign file: JSON (``.json``) or YAML (``.yaml``/``.yml``, PyYAML: installed with
     ROS 2 and with the campaigns extra)."""
+    return CampaignConfig.from_dict(read_config_data(path), where=Path(path).name)
+
+
+def read_config_data(path) -> dict:
+    """A campaign file's mapping, as written (``load_config`` validates it)."""
     p = Path(path)
     try:
         text = p.read_text()
@@ -212,7 +228,7 @@ def load_config(path) -> CampaignConfig:
             data = json.loads(text)
         except json.JSONDecodeError as exc:
             raise CampaignError(f"campaign file {p}: not JSON: {exc}") from None
-    return CampaignConfig.from_dict(data if data is not None else {}, where=p.name)
+    return data if data is not None else {}
 
 
 def _section(cls, data, where: str):

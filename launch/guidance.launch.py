@@ -3,7 +3,7 @@
     ros2 launch daddy_ros guidance.launch.py [namespace:=/sc1] [params_file:=my.yaml]
         [log_level:=debug] [autostart:=false]
 
-``namespace``: the node's namespace (its topics, services and helper node move with it; the
+``namespace``: the node's namespace (its topics, services and action move with it; the
 bundled parameters file applies in any namespace). ``params_file``: default the installed
 ``config/guidance.yaml``. ``log_level``: the node's logger level. ``autostart``: false leaves
 the lifecycle transitions to a lifecycle manager (msg_docs/README.md, Lifecycle).

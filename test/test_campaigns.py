@@ -69,6 +69,40 @@ def test_bad_config_names_the_field(data, field):
         CampaignConfig.from_dict(data)
 
 
+def test_a_case_s_closed_loop_section_sets_its_mission_defaults_and_a_file_overrides_them(
+        tmp_path):
+    """Earth-Mars's navigation errors and success criteria come from its case file (an
+    interplanetary mission's, not the cislunar defaults); a campaign file's fields override
+    them one by one; a case file with a bad closed_loop section is named."""
+    em = CampaignConfig.from_dict({"case": "earth_mars"})
+    assert (em.navigation.position_m, em.success.miss_km, em.success.miss_cm_s) == (
+        1000.0, 1000.0, 100.0)
+    assert em.execution == CampaignConfig().execution          # not in its section: defaults
+    own = CampaignConfig.from_dict({"case": "earth_mars", "success": {"miss_km": 5.0}})
+    assert (own.success.miss_km, own.success.miss_cm_s) == (5.0, 100.0)
+    assert CampaignConfig.from_dict(em.to_dict()) == em          # results headers round-trip
+    assert CampaignConfig.from_dict({"case": "halo_l2_l1"}).success == CampaignConfig().success
+    # the command line's --case (daddy_campaign run --case earth_mars) too, with or without a
+    # campaign file, whose own fields still win
+    import argparse
+
+    from daddy_sim.campaign_cli import _config_from_args
+    args = argparse.Namespace(config=None, case="earth_mars", runs=3, first_seed=None)
+    assert _config_from_args(args).success == em.success
+    (tmp_path / "c.json").write_text(json.dumps({"success": {"miss_cm_s": 50.0}}))
+    args.config = str(tmp_path / "c.json")
+    assert _config_from_args(args).success.miss_cm_s == 50.0
+    assert _config_from_args(args).navigation == em.navigation
+    case = json.loads((Path(__file__).parents[1] / "daddy_core/catalogue/cases/"
+                       "earth_mars.json").read_text())
+    for section, field in (({"success": {"miss_km": -1.0}}, "closed_loop.success.miss_km"),
+                           ({"guidanse": {}}, "closed_loop.guidanse: unknown section")):
+        path = tmp_path / "mission.json"
+        path.write_text(json.dumps({**case, "closed_loop": section}))
+        with pytest.raises(CampaignError, match=field.replace(".", r"\.")):
+            CampaignConfig.from_dict({"case": str(path)})
+
+
 def test_config_files_json_and_yaml(tmp_path):
     (tmp_path / "c.json").write_text(json.dumps(OPEN_LOOP))
     (tmp_path / "c.yaml").write_text("case: halo_l2_l1\nseeds: {first: 1, count: 4}\n"

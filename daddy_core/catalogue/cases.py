@@ -48,7 +48,7 @@ SPACECRAFT_KEYS = ("wet_mass_kg", "dry_mass_kg", "max_thrust_n", "isp_s", "g0_m_
 # every top-level field a case file may have (which apply depends on its system)
 CASE_KEYS = ("name", "description", "source", "system", "state_units", "x0", "x_target",
              "tof_days", "stages", "stage_duration", "stages_per_revolution", "revolutions",
-             "perturbations", "spacecraft", "problem", "solver", "phases")
+             "perturbations", "spacecraft", "problem", "solver", "phases", "closed_loop")
 # fields that are not case settings, and where they are set instead
 _SET_ELSEWHERE = {"r_min_km": "it is not a case setting: give it to problem_from_case(case, "
                               "r_min_km=...) or `daddy solve --r-min-km`",
@@ -81,6 +81,8 @@ class Case:
         perturbations: the forces beyond point-mass gravity and thrust (Earth-centred cases).
         stages_per_revolution: Earth-centred cases: the stage density (None otherwise).
         phases: a multi-phase case's ``phased_cases.PhaseSpec``s (empty for one phase).
+        closed_loop: the mission's defaults for a closed-loop campaign's sections (e.g. its
+            navigation errors and success criteria: ``daddy_sim.campaigns`` validates them).
     """
 
     name: str
@@ -99,6 +101,7 @@ class Case:
     perturbations: frozenset = frozenset()
     stages_per_revolution: int | None = None
     phases: tuple = ()
+    closed_loop: dict = field(default_factory=dict)
 
     @property
     def staged_in_angle(self) -> bool:
@@ -298,7 +301,17 @@ def case_from_dict(d: dict) -> Case:
     return Case(name=name, description=str(d.get("description", "")), system=system, units=units,
                 spacecraft=spacecraft, x0=x0, x_target=xt, tof=tof, stages=stages,
                 problem=dict(d.get("problem", {})), solver=dict(d.get("solver", {})),
-                phases=phases)
+                phases=phases, closed_loop=_closed_loop(d))
+
+
+def _closed_loop(d: dict) -> dict:
+    """The case's ``closed_loop`` section: a mapping of mappings (its fields are checked where
+    a campaign reads them)."""
+    section = d.get("closed_loop", {})
+    if not (isinstance(section, dict) and all(isinstance(v, dict) for v in section.values())):
+        raise DaddyError("case field 'closed_loop' must be an object of objects (campaign "
+                         "sections, e.g. {\"success\": {\"miss_km\": 1000.0}})")
+    return {k: dict(v) for k, v in section.items()}
 
 
 def _earth_case(d: dict, name: str, units: Units, spacecraft: Spacecraft, x0: np.ndarray,
@@ -328,7 +341,7 @@ def _earth_case(d: dict, name: str, units: Units, spacecraft: Spacecraft, x0: np
                 x_target=np.concatenate([mee_t, [tof, m0]]), tof=tof, stages=stages,
                 problem=dict(d.get("problem", {})), solver=dict(d.get("solver", {})),
                 revolutions=float(revs), t_start=L0, perturbations=perturbations,
-                stages_per_revolution=spr)
+                stages_per_revolution=spr, closed_loop=_closed_loop(d))
 
 
 def _known_keys(d: dict, known: tuple, prefix: str) -> None:
