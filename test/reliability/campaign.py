@@ -72,10 +72,12 @@ class Sizes:
     solver_repeats: int = 3
     kills: int = 2
     api_calls: int = 1000
+    goals: int = 100
 
 
 FULL = Sizes()
-QUICK = Sizes(bad_inputs=200, burst=200, sustained_s=8.0, solver_repeats=1, kills=1, api_calls=200)
+QUICK = Sizes(bad_inputs=200, burst=200, sustained_s=8.0, solver_repeats=1, kills=1, api_calls=200,
+              goals=20)
 
 
 def rss_mb(pid: int) -> float | None:
@@ -873,6 +875,100 @@ def restart_without_plan(sizes: Sizes, workdir: Path) -> list[Row]:
     return [row]
 
 
+# ---------------------------------------------------------------------------- action
+GOAL_RESULT_TIMEOUT_S = 180.0   # a goal's result, whatever its solve (cold solves included)
+
+
+def action_goals(sizes: Sizes, workdir: Path) -> list[Row]:
+    """The Replan action under a storm (msg_docs/replan_action.md as the contract): ``goals``
+    goals within a second, every other one cancelled at once, some cold, some with a bad frame
+    or budget, while estimates flow: every accepted goal gets a result (none lost), a cancelled
+    goal ends CANCELED (or finished before its cancel arrived), a refused one ABORTED with its
+    code, a CANCELED result never says a plan was stored, and the node answers a plain request
+    afterwards."""
+    interfaces = _optional("daddy_interfaces.action")
+    if interfaces is None:
+        return [Row("action: goal storm", tried=1,
+                    failures=["daddy_interfaces is not built (make interfaces)"])]
+    from action_msgs.msg import GoalStatus
+    from rclpy.action import ActionClient
+    from rclpy.qos import QoSProfile, ReliabilityPolicy
+
+    from daddy_ros import conversions as cv
+    Replan = interfaces.Replan
+    _, sim, _ = _nominal()
+    row = Row(f"action: {sizes.goals} goals in 1 s, half cancelled")
+
+    def session():
+        client = Client()
+        node = _start_node(workdir, client, sim)
+        # (the services' depth as msg_docs/replan_action.md gives it: a burst queues)
+        deep = QoSProfile(depth=100, reliability=ReliabilityPolicy.RELIABLE)
+        action = ActionClient(client.node, Replan, "/daddy_guidance/replan_action",
+                              goal_service_qos_profile=deep, result_service_qos_profile=deep,
+                              cancel_service_qos_profile=deep)
+        try:
+            if not row.check(action.wait_for_server(timeout_sec=20), "no action server"):
+                return
+            pos, vel, mass = sim.truth_si()
+            handles, t0 = [], time.monotonic()
+            for k in range(sizes.goals):
+                t = T0_S + 1.0 + k * 0.01
+                client.publish_estimate(pos, vel, mass, t)
+                goal = Replan.Goal(request_id=f"storm-{k}", cold=k % 7 == 3,
+                                   time_budget_s=-1.0 if k % 11 == 5 else 30.0)
+                goal.header.stamp = cv.s_to_stamp(t)
+                goal.header.frame_id = "map" if k % 13 == 6 else ""
+                handles.append((k, action.send_goal_async(goal)))
+            sent_s = time.monotonic() - t0
+            results = {}
+            for k, fut in handles:
+                accepted = client.wait_for(lambda f=fut: f.done(), 30.0) and fut.result()
+                if not row.check(bool(accepted) and accepted.accepted, f"goal {k} not accepted"):
+                    continue
+                handle = fut.result()
+                if k % 2:
+                    handle.cancel_goal_async()
+                results[k] = handle.get_result_async()
+            for k, fut in results.items():
+                done = client.wait_for(lambda f=fut: f.done(), GOAL_RESULT_TIMEOUT_S)
+                if not row.check(bool(done), f"goal {k}: no result (lost)"):
+                    continue
+                status, r = fut.result().status, fut.result().result
+                refused = k % 11 == 5 or k % 13 == 6
+                if refused:
+                    ok = status == GoalStatus.STATUS_ABORTED and r.code == "INPUT_REJECTED"
+                elif k % 2:
+                    ok = (status == GoalStatus.STATUS_CANCELED and r.code == "CANCELLED"
+                          and not r.plan_stored) or status in (
+                        GoalStatus.STATUS_SUCCEEDED, GoalStatus.STATUS_ABORTED)
+                else:
+                    ok = status in (GoalStatus.STATUS_SUCCEEDED, GoalStatus.STATUS_ABORTED) \
+                        and r.code != "CANCELLED"
+                row.check(ok and r.request_id == f"storm-{k}",
+                          f"goal {k}: status {status} code {r.code} ({r.message[:80]})")
+            row.check(_good_request(client, "after-storm", pos, vel, mass, T0_S + 5.0),
+                      "the request after the storm was not answered OK",
+                      time.monotonic() - t0)
+            row.failures.append(f"(info) {sizes.goals} goals sent in {sent_s:.2f} s")
+        finally:
+            action.destroy()
+            node.stop()
+            client.close()
+
+    _ros_session(session)
+    return [row]
+
+
+def _optional(module: str):
+    """``module`` imported, or None when it is not installed."""
+    import importlib
+    try:
+        return importlib.import_module(module)
+    except ImportError:
+        return None
+
+
 # ---------------------------------------------------------------------------- core API fuzz
 def core_api(sizes: Sizes, workdir: Path) -> list[Row]:
     """Fuzz Problem construction and solve() arguments: every bad call raises DaddyError naming
@@ -962,7 +1058,8 @@ def core_api(sizes: Sizes, workdir: Path) -> list[Row]:
 
 
 CATEGORIES = {"inputs": bad_inputs, "load": load, "solver": solver_faults,
-              "process": process_faults, "restart": restart_without_plan, "core": core_api}
+              "process": process_faults, "restart": restart_without_plan, "action": action_goals,
+              "core": core_api}
 
 
 def format_table(rows: list[Row]) -> str:
