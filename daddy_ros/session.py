@@ -78,7 +78,7 @@ class GuidanceSession:
         self._withheld: list[float] = []   # estimate stamps whose thrust waits for a re-plan
         self._withheld_lock = threading.Lock()
         self._unanswered: list[float] = []   # estimate stamps that came before any plan
-        self._cancel = threading.Event()    # the running solve's cancel flag
+        self._cancel = (0, threading.Event())   # (solve number, its cancel flag)
         self.figures: dict = {}             # the running solve's progress (``ProgressLine``)
         self._replan_on_first_estimate = False
         self.fit = PlanFit(planner.case, planner.config.fit_position_m,
@@ -202,10 +202,12 @@ class GuidanceSession:
 
     def cancel(self, number: int) -> bool:
         """Cancel solve ``number`` if it is running: it stops within one iteration and the
-        plan in force is kept. False when it is not running (not started, or finished)."""
-        if not self.queue.running(number):
+        plan in force is kept. False when it is not running (not started, or finished). (Each
+        solve has its own flag: a late cancel cannot reach the next solve.)"""
+        running, flag = self._cancel
+        if running != number or not self.queue.running(number):
             return False
-        self._cancel.set()
+        flag.set()
         return True
 
     def report_of(self, number: int) -> SolveReport | None:
@@ -316,7 +318,7 @@ class GuidanceSession:
             req = self.queue.take()
             if req is None:
                 return
-            self._cancel.clear()
+            self._cancel = (self.queue.started, threading.Event())   # (take() numbered it)
             self.figures = {}
             try:
                 self._replan_once(req.request_id, req.stamp_s, req.cold, req.time_budget_s)
@@ -353,7 +355,8 @@ class GuidanceSession:
         # nominal days into the flight): solved cold from the estimate
         plan = self.planner.plan
         misfit = plan is not None and not self.fit.check(plan, stamp, pos, vel).fits
-        watch = dict(time_budget_s=time_budget_s, cancel=self._cancel, progress=self._progress)
+        watch = dict(time_budget_s=time_budget_s, cancel=self._cancel[1],
+                     progress=self._progress)
         try:
             out = self.planner.replan(pos, vel, mass, stamp, request_id, now_s=request_stamp,
                                       cold=cold or misfit, **watch)
