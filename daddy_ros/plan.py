@@ -149,6 +149,16 @@ class Plan:
         k = self.stage_index(t_s)
         return np.zeros(3) if k is None else self.thrust_n[k].copy()
 
+    def mass_at(self, t_s: float) -> float | None:
+        """The plan's mass [kg] at time t: linear across the stage holding it (the mass flow is
+        constant at a stage's constant thrust); None outside the plan's stages."""
+        k = self.stage_index(t_s)
+        if k is None:
+            return None
+        f = (t_s - float(self.start_times_s[k])) / float(self.stage_dt_s[k])
+        m0, m1 = self.states_si[k, 6], self.states_si[k + 1, 6]
+        return float(m0 + min(max(f, 0.0), 1.0) * (m1 - m0))
+
     def fly_law(self, k: int, thrust_n: np.ndarray) -> None:
         """Stage k flies ``thrust_n`` [N], a feedback law's (``daddy_ros.feedback``)."""
         self.thrust_n[k] = thrust_n

@@ -22,7 +22,7 @@ from daddy_core.errors import DaddyError
 from .checks import InputRejected, StampGuard
 from .config import PlannerConfig, TriggerConfig
 from .feedback import FeedbackLaws
-from .plan import Code, Level, Plan
+from .plan import TIME_TOLERANCE_S, Code, Level, Plan
 from .plan_fit import PlanFit
 from .planner import GuidancePlanner
 from .request_queue import RequestQueue
@@ -222,7 +222,7 @@ class GuidanceSession:
         """Ask the re-plan policy about an accepted estimate; when a re-plan is due, queue it
         and withhold the estimate's thrust command until it has finished -- unless it is a
         stage boundary's and the plan's feedback law serves it (``_fly_law``)."""
-        mass = self.queue.mass_for(stamp)
+        mass = self.mass_at(stamp, plan)
         if self.trigger is None or mass is None:
             return False
         reason = self.trigger.observe(stamp, est.pos_m, est.vel_m_s, mass, plan)
@@ -232,6 +232,23 @@ class GuidanceSession:
             return False
         self._withhold_for_replan(f"self-{reason}-{stamp:.3f}", stamp)
         return True
+
+    def mass_at(self, stamp: float, plan: Plan | None) -> float | None:
+        """The spacecraft's mass [kg] at a state estimate's time: the mass estimate of that
+        time, or the newest before it carried to it by the plan's consumption in between (a
+        state and a mass estimate of one epoch come on two topics, in either order: a state
+        taken with the mass of the estimate before ran the re-plan policy and the feedback law
+        on a mass a stage's propellant too high; docs/design-notes.md, the mass of an
+        estimate's time)."""
+        sample = self.queue.mass_sample_for(stamp)
+        if sample is None:
+            return None
+        t_mass, mass = sample
+        if plan is not None and stamp - t_mass > TIME_TOLERANCE_S:
+            then, now = plan.mass_at(t_mass), plan.mass_at(stamp)
+            if then is not None and now is not None:
+                mass += now - then
+        return mass
 
     def _fly_law(self, est: StateEstimate, stamp: float, mass: float, plan: Plan) -> bool:
         """The stage's thrust from the plan's feedback law where the estimate is inside the
@@ -338,7 +355,7 @@ class GuidanceSession:
                          request_stamp, started)
             return
         now = request_stamp if request_stamp is not None else (state.stamp_s if state else None)
-        mass = None if state is None else self.queue.mass_for(state.stamp_s)
+        mass = None if state is None else self.mass_at(state.stamp_s, self.planner.plan)
         if state is None or mass is None:
             self._finish(request_id, None, Level.ERROR, Code.NO_ESTIMATE,
                          "no valid state_estimate and mass_estimate yet", now, started)

@@ -113,6 +113,38 @@ def test_the_session_answers_a_stage_boundary_from_the_law_at_once():
         session.stop()
 
 
+def test_a_state_before_its_epoch_s_mass_gets_the_law_of_the_mass_carried_along_the_plan():
+    """State and mass of one epoch come on two topics, in either order. A state taken before
+    its mass uses the last mass estimate carried to its time by the plan's consumption
+    (``GuidanceSession.mass_at``), so the law's thrust is the one of the mass-first order
+    (before: the previous epoch's mass, a stage's propellant too high, gave a law that flew
+    the ROS loop 10,141 km off its plan: docs/design-notes.md)."""
+    commands = []
+    for mass_first in (True, False):
+        planner = _planner()
+        out = _Outputs()
+        session = GuidanceSession(planner, ReplanTrigger.for_planner(planner, LAWS_ONLY), "", "",
+                                  out, lambda: True, FeedbackLaws.for_planner(planner, LAWS_ONLY))
+        plan = planner.plan
+        try:
+            for k, dt in ((2, -60.0), (3, 0.0)):
+                t = float(plan.start_times_s[k]) + dt
+                x = session.fit.predicted(plan, t)
+                state = OdometryState(x[:3] + [500.0, 0, 0], x[3:6], t, "", None, None)
+                if mass_first or k == 2:   # (the prediction starts from a full estimate)
+                    session.on_mass(float(x[6]), t)
+                    session.on_state(state, t)
+                else:                      # the boundary's state first: the last mass carried
+                    session.on_state(state, t)
+                    assert session.mass_at(t, plan) == pytest.approx(float(x[6]), rel=1e-12)
+                    session.on_mass(float(x[6]), t)
+            assert session.laws_served == 1
+            commands.append(out.thrust[-1][1])
+        finally:
+            session.stop()
+    np.testing.assert_allclose(commands[1], commands[0], rtol=1e-9, atol=1e-15)
+
+
 @pytest.mark.parametrize("direction", [0, 1])
 def test_a_law_at_the_validity_edge_is_the_re_solved_least_correction(direction):
     """At the validity's edge (feedback_position_m, feedback_velocity_m_s off the plan, in two

@@ -394,3 +394,17 @@ def test_importing_the_solver_does_not_import_scipy_integrate():
             "print('scipy.integrate' in sys.modules)")
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True)
     assert out.stdout.strip() == "False"
+
+
+def test_an_attribute_set_on_a_plain_rhs_by_the_old_api_is_a_warning_naming_dynamics():
+    """``rhs.scalar_components = True`` (read by earlier versions) is not read now: a
+    FutureWarning names the Dynamics field instead of ignoring it silently; the integration is
+    the plain function's, as with no attribute."""
+    def f(t, x, u):
+        return np.array([x[1], -x[0]])
+
+    plain = rk78(f, np.array([1.0, 0.0]), None, 0.0, 1.0, tol=1e-12)
+    f.scalar_components = True
+    with pytest.warns(FutureWarning, match=r"Dynamics\(rhs, scalar_components=True\)"):
+        flagged = rk78(f, np.array([1.0, 0.0]), None, 0.0, 1.0, tol=1e-12)
+    np.testing.assert_array_equal(flagged, plain)

@@ -7,6 +7,7 @@ where a ``Dynamics`` is expected means the safe defaults.
 """
 from __future__ import annotations
 
+import warnings
 from dataclasses import dataclass
 from typing import Callable, Optional
 
@@ -50,6 +51,21 @@ class Dynamics:
         return u if self.prepare_control is None or u is None else self.prepare_control(u)
 
 
+# what earlier versions read from attributes set on the function: now ``Dynamics`` fields
+RETIRED_ATTRIBUTES = ("scalar_components", "prepare_control", "max_step")
+
+
 def as_dynamics(rhs) -> Dynamics:
-    """``rhs`` itself if it is a ``Dynamics``, else a plain callable with the safe defaults."""
-    return rhs if isinstance(rhs, Dynamics) else Dynamics(rhs)
+    """``rhs`` itself if it is a ``Dynamics``, else a plain callable with the safe defaults.
+    An attribute earlier versions read from the function (``rhs.scalar_components = True``)
+    is not read: a FutureWarning (shown to users by default) names its replacement, a
+    ``Dynamics`` field."""
+    if isinstance(rhs, Dynamics):
+        return rhs
+    retired = [a for a in RETIRED_ATTRIBUTES if hasattr(rhs, a)]
+    if retired:
+        fields = ", ".join(f"{a}={getattr(rhs, a)!r}" for a in retired)
+        warnings.warn(f"rhs.{retired[0]} is no longer read: pass Dynamics(rhs, {fields}) "
+                      "(daddy_core.dynamics.rhs.Dynamics) instead of setting attributes on the "
+                      "function", FutureWarning, stacklevel=3)
+    return Dynamics(rhs)

@@ -774,6 +774,12 @@ def process_faults(sizes: Sizes, workdir: Path, progress=None) -> list[Row]:
             node.stop()
         with c.cond:
             thrust_stamps = [cv.stamp_to_s(m.header.stamp) for _, m in c.thrust]
+            misfits = [status(m)[1] for _, m in c.diags
+                       if status(m)[2].get("code") == "PLAN_DOES_NOT_FIT"]
+        # an error-free flight fits the plans it flies, across restarts with persist_file (a
+        # state taken with the previous epoch's mass once flew it 10,141 km off: design notes)
+        row.check(not misfits, f"{len(misfits)} PLAN_DOES_NOT_FIT in an error-free flight: "
+                               f"{misfits[:2]}")
         leaked = [s for s in inactive["stamps"] if any(abs(s - x) < 1e-6 for x in thrust_stamps)]
         row.check(bool(inactive["stamps"]) and not leaked,
                   f"thrust_command published while inactive for {leaked or 'no estimate sent'}")
