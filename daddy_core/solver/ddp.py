@@ -108,7 +108,10 @@ def _iteration(cur: _Nominal, method: Method, ctl: StepControl, stop: Stopping,
     J = st.cost
     full_step_gain = -(gains.dv1 + gains.dv2) / max(abs(J), 1e-300)
     t0 = time.perf_counter()
-    step = ctl.step(st, gains, J)
+    # a trial step may overflow in the user's dynamics or cost: a non-finite trial is rejected
+    # (``forward_pass``), so numpy's warnings would only be noise on the user's terminal
+    with np.errstate(over="ignore", invalid="ignore", divide="ignore"):
+        step = ctl.step(st, gains, J)
     stats.forward_s += time.perf_counter() - t0
     if isinstance(step, Blame):
         # those stages' steps are bounded now: sweep again on the same expansions (an
