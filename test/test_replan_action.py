@@ -154,6 +154,7 @@ def test_a_cancel_stops_the_solve_and_keeps_the_plan_in_force(graph):
     waited = time.monotonic() - t_cancel
     assert status == GoalStatus.STATUS_CANCELED, (status, r.code, r.message)
     assert r.code == "CANCELLED" and not r.plan_stored and r.level == 1
+    assert cancel.done() and cancel.result().return_code == 0   # ERROR_NONE: accepted
     assert node.planner.plan is before                        # the plan in force kept
     starts, u = cv.joint_trajectory_to_schedule(r.schedule)
     assert np.allclose(u, before.thrust_n)
