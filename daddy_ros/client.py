@@ -10,7 +10,6 @@ from __future__ import annotations
 import threading
 import time
 
-from geometry_msgs.msg import InertiaStamped
 from lifecycle_msgs.srv import ChangeState, GetState
 from rcl_interfaces.srv import GetParameters, SetParameters
 from rclpy.node import Node
@@ -94,11 +93,8 @@ class GuidanceClient:
         self.pub_state.publish(cv.state_to_odometry(pos_m, vel_m_s, stamp_s, frame))
 
     def send_mass(self, mass_kg: float, stamp_s: float, frame: str | None = None) -> None:
-        m = InertiaStamped()
         frame = self.frame_id if frame is None else frame
-        m.header = Header(stamp=cv.s_to_stamp(stamp_s), frame_id=frame)
-        m.inertia.m = float(mass_kg)
-        self.pub_mass.publish(m)
+        self.pub_mass.publish(cv.mass_estimate(mass_kg, stamp_s, frame))
 
     def publish_estimate(self, pos_m, vel_m_s, mass_kg: float, stamp_s: float,
                          frame: str | None = None) -> None:

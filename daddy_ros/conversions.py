@@ -8,7 +8,7 @@ from dataclasses import dataclass
 import numpy as np
 from builtin_interfaces.msg import Duration, Time
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
-from geometry_msgs.msg import PoseStamped, Vector3Stamped
+from geometry_msgs.msg import InertiaStamped, PoseStamped, Vector3Stamped
 from nav_msgs.msg import Odometry, Path
 from std_msgs.msg import Header
 from trajectory_msgs.msg import JointTrajectory, JointTrajectoryPoint
@@ -139,6 +139,14 @@ def joint_trajectory_to_schedule(msg: JointTrajectory):
     t = np.array([p.time_from_start.sec + 1e-9 * p.time_from_start.nanosec for p in msg.points])
     u = np.array([list(p.effort) for p in msg.points], dtype=float).reshape(-1, 3)
     return t, u
+
+
+def mass_estimate(mass_kg: float, stamp_s: float, frame_id: str) -> InertiaStamped:
+    """A mass estimate [kg] as ``mass_estimate`` takes it (msg_docs/mass_estimate.md)."""
+    msg = InertiaStamped()
+    msg.header = Header(stamp=s_to_stamp(stamp_s), frame_id=frame_id)
+    msg.inertia.m = float(mass_kg)
+    return msg
 
 
 def thrust_command(u_n, stamp_s: float, frame_id: str) -> Vector3Stamped:

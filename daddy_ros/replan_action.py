@@ -95,8 +95,7 @@ class ReplanActionServer:
             return _result(request_id, refusal[0], Level.ERROR, refusal[1])
         session, t0 = self.session(), time.monotonic()
         stamp = cv.stamp_to_s(goal.header.stamp) or None
-        number = session.request_goal(request_id, stamp, goal.cold,
-                                      goal.time_budget_s or None)
+        number = session.request(request_id, stamp, goal.cold, goal.time_budget_s or None)
         me = bytes(goal_handle.goal_id.uuid)
         with self._lock:
             self._waiting.setdefault(number, set()).add(me)

@@ -98,19 +98,14 @@ class RequestQueue:
 
     def mass_sample_for(self, stamp_s: float) -> tuple[float, float] | None:
         """(stamp s, kg) of the mass estimate for a state's time: same stamp, else the newest
-        before it, else the newest received; None before any."""
+        before it, else the newest received; None before any (the session carries it to the
+        state's time along the plan: ``GuidanceSession.mass_at``)."""
         with self.cond:
             masses = list(self._masses)
         if not masses:
             return None
         before = [m for m in masses if m[0] <= stamp_s + TIME_TOLERANCE_S]
         return max(before) if before else masses[-1]
-
-    def mass_for(self, stamp_s: float) -> float | None:
-        """The mass [kg] of ``mass_sample_for`` (the session carries it to the state's time
-        along the plan: ``GuidanceSession.mass_at``)."""
-        sample = self.mass_sample_for(stamp_s)
-        return None if sample is None else sample[1]
 
     # ------------------------------------------------------------------ requests
     def enqueue(self, request_id: str, stamp_s: float | None, cold: bool = False,

@@ -165,9 +165,12 @@ class GuidanceSession:
             self._answer_unanswered(self.planner.plan)
         self._maybe_replan_after_restart()
 
-    def request(self, request_id: str, stamp: float | None) -> str:
-        """Queue a re-plan request; returns the id that will serve it."""
-        return self.queue.enqueue(request_id, stamp)
+    def request(self, request_id: str, stamp: float | None, cold: bool = False,
+                time_budget_s: float | None = None) -> int:
+        """Queue a re-plan request (``cold``: from the scenario's cold guess; ``time_budget_s``:
+        its budget, None: the node's); returns the number of the solve that will serve it
+        (``report_of``, ``cancel``)."""
+        return self.queue.enqueue(request_id, stamp, cold, time_budget_s)
 
     def reconfigure(self, changes: dict, settings: TriggerConfig) -> None:
         """Parameters changed while configured (``config``: the runtime ones): the planner's
@@ -193,12 +196,6 @@ class GuidanceSession:
             self.laws.velocity_m_s = settings.feedback_velocity_m_s
         else:   # (built for the plan in force when first served)
             self.laws = FeedbackLaws.for_planner(self.planner, settings)
-
-    def request_goal(self, request_id: str, stamp: float | None, cold: bool,
-                     time_budget_s: float | None) -> int:
-        """Queue a re-plan for an action goal; returns the number of the solve that will serve
-        it (``report_of``, ``cancel``)."""
-        return self.queue.enqueue(request_id, stamp, cold, time_budget_s)
 
     def cancel(self, number: int) -> bool:
         """Cancel solve ``number`` if it is running: it stops within one iteration and the

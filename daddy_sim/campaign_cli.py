@@ -70,13 +70,14 @@ def _config_from_args(args, base: CampaignConfig | None = None) -> CampaignConfi
     """The campaign file (else ``base``, else the defaults) with the command line's case and
     seeds; the case's own defaults (its ``closed_loop`` section) fill what the file leaves
     out."""
-    config = load_config(args.config) if args.config else (base or CampaignConfig())
-    if args.case:
+    if args.case:   # (read as written: the case's defaults fill what the file leaves out)
         check_case(args.case, "--case")
         data = read_config_data(args.config) if args.config else (
             base.to_dict() if base else {})
         config = CampaignConfig.from_dict({**data, "case": args.case},
                                           where=args.config or "--case")
+    else:
+        config = load_config(args.config) if args.config else (base or CampaignConfig())
     if args.runs is not None or args.first_seed is not None:
         first = args.first_seed if args.first_seed is not None else config.seeds[0]
         count = args.runs if args.runs is not None else len(config.seeds)

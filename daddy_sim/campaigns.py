@@ -179,8 +179,7 @@ class CampaignConfig:
             if key not in known:
                 raise CampaignError(f"{where}.{key}: unknown field (known: {', '.join(known)})")
         case = data.get("case", cls.case)
-        check_case(case, f"{where}.case")
-        mission = load_case(case).closed_loop   # the case's own defaults of some sections
+        mission = check_case(case, f"{where}.case").closed_loop   # its own section defaults
         for name in mission:
             if name not in _SECTIONS:
                 raise CampaignError(f"case {case!r}: closed_loop.{name}: unknown section "
@@ -298,9 +297,9 @@ def _seeds_to_data(seeds: tuple):
     return list(seeds)
 
 
-def check_case(name, where: str) -> None:
+def check_case(name, where: str):
     """A catalogue case (or case file) the truth simulator can fly: Cartesian states with a
-    spacecraft."""
+    spacecraft; returns it loaded (``catalogue.Case``)."""
     if not isinstance(name, str):
         raise CampaignError(f"{where}: must be a case name, got {name!r}")
     try:
@@ -310,6 +309,7 @@ def check_case(name, where: str) -> None:
     if case.spacecraft is None or case.units.name not in CARTESIAN_SYSTEMS:
         raise CampaignError(f"{where}: {name!r} cannot be flown by the closed loop (it needs "
                             "Cartesian states and a spacecraft)")
+    return case
 
 
 # ---------------------------------------------------------------------------------------------

@@ -70,15 +70,9 @@ class RosLink:
 
     def truth(self, pos, vel, mass, t_s) -> None:
         """Publish the simulator's true state (``truth_topics``)."""
-        from geometry_msgs.msg import InertiaStamped
-
         from daddy_ros import conversions as cv
-        msg = cv.state_to_odometry(pos, vel, t_s, self.frame_id)
-        self._truth_state.publish(msg)
-        m = InertiaStamped()
-        m.header.stamp, m.header.frame_id, m.inertia.m = cv.s_to_stamp(t_s), self.frame_id, \
-            float(mass)
-        self._truth_mass.publish(m)
+        self._truth_state.publish(cv.state_to_odometry(pos, vel, t_s, self.frame_id))
+        self._truth_mass.publish(cv.mass_estimate(mass, t_s, self.frame_id))
 
     def publish_estimate(self, pos, vel, mass, t_s):
         self.client.publish_estimate(pos, vel, mass, t_s)

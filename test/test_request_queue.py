@@ -43,7 +43,7 @@ def test_a_request_s_options_travel_with_it_and_the_newest_wins_when_coalesced()
 
 def test_the_estimate_for_a_request_and_the_mass_of_its_time():
     q = RequestQueue()
-    assert q.state_for(None) is None and q.mass_for(5.0) is None
+    assert q.state_for(None) is None and q.mass_sample_for(5.0) is None
     for t in (10.0, 20.0, 30.0):
         q.add_state([t, 0, 0], [0, 0, 0], t)
         q.add_mass(t, 1000.0 - t)
@@ -52,7 +52,8 @@ def test_the_estimate_for_a_request_and_the_mass_of_its_time():
     assert q.state_for(19.2).stamp_s == 20.0                 # ... within FUTURE_TOLERANCE_S
     with pytest.raises(InputRejected, match="future of the request stamp"):
         q.state_for(1.0)
-    assert q.mass_for(20.0) == 980.0 and q.mass_for(25.0) == 980.0 and q.mass_for(5.0) == 970.0
+    assert q.mass_sample_for(20.0) == (20.0, 980.0) and q.mass_sample_for(25.0) == (20.0, 980.0)
+    assert q.mass_sample_for(5.0) == (30.0, 970.0)              # none before: the newest
 
 
 def test_a_request_waits_for_the_estimate_of_its_time_then_its_queue_time_counts():

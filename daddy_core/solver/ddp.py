@@ -13,9 +13,9 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from .deadline import Deadline, passed
 from .globalization import Blame, StepControl
 from .options import Method, SolverOptions, Sweep
-from .deadline import Deadline, passed
 from .results import Status, StepResult
 from .stopping import CONVERGED, Stopping
 from .sweeps import Gains, Stages, Trial, backward_sweep, new_maps

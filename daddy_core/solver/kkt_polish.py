@@ -40,11 +40,11 @@ import numpy as np
 from .. import da
 from ..errors import DaddyError
 from ..problem import Problem, largest, max_violation
+from .deadline import Deadline, passed
 from .newton import (BandedSigma, ConstraintModel, NewtonResult, column_weights, polish,
                      stage_columns)
 from .optimality import Optimality, every_constraint, objective, optimality
 from .options import SolverOptions
-from .deadline import Deadline, passed
 from .results import Status, StepResult, not_halved
 from .stage_maps import StageMaps
 

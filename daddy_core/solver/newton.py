@@ -31,8 +31,8 @@ import numpy as np
 from .. import da
 from ..errors import DaddyError
 from ..problem import Problem, largest, max_violation
-from .options import SolverOptions
 from .deadline import Deadline, passed
+from .options import SolverOptions
 from .results import Status, StepResult, not_halved
 from .stage_maps import StageMaps, expand_dynamics
 
