@@ -12,6 +12,7 @@ STAMP := $(VENV)/.bootstrapped
 PLOTS := $(VENV)/.plots
 RECORD := $(VENV)/.record
 CAMPAIGNS := $(VENV)/.campaigns
+TABLES := $(VENV)/.tables
 INTERFACES := $(VENV)/.interfaces
 PIP := $(PY) -m pip install --disable-pip-version-check -q -c requirements/pins.txt
 
@@ -63,17 +64,23 @@ $(RECORD): $(STAMP) requirements/record.txt
 	@$(PIP) -r requirements/record.txt && touch $@ || \
 	  echo "record: mcap could not be installed; gnc_demo --record will say so"
 
-# The campaigns extra (Dask): daddy_campaign run --executor dask; the tests run a loopback
-# LocalCluster.
+# The campaigns extra (Dask, tqdm): daddy_campaign run --executor dask and its progress bar; the
+# tests run a loopback LocalCluster.
 $(CAMPAIGNS): $(STAMP) requirements/campaigns.txt
 	@$(PIP) -r requirements/campaigns.txt && touch $@ || \
 	  echo "campaigns: dask could not be installed; --executor dask will say so"
+
+# The tables extra (pyarrow, pandas): a campaign's results as a Parquet table; the tests read it
+# with pandas.
+$(TABLES): $(STAMP) requirements/tables.txt
+	@$(PIP) -r requirements/tables.txt && touch $@ || \
+	  echo "tables: pyarrow could not be installed; campaigns will write no Parquet table"
 
 DEMO_CASE ?= halo_l2_l1
 demo: $(STAMP) $(PLOTS) $(INTERFACES)
 	$(VENV)/bin/gnc_demo --case $(DEMO_CASE)
 
-test: $(STAMP) $(PLOTS) $(RECORD) $(CAMPAIGNS) $(INTERFACES)
+test: $(STAMP) $(PLOTS) $(RECORD) $(CAMPAIGNS) $(TABLES) $(INTERFACES)
 	$(PY) -m pytest -q test
 
 test-slow: $(STAMP)
@@ -82,7 +89,7 @@ test-slow: $(STAMP)
 # a dispersion campaign of the demo's loop: results file, summary and plot in out/
 # (EXECUTOR=dask: on a loopback Dask LocalCluster; JOBS: workers)
 MC_OUT := out/monte-carlo-$(DEMO_CASE).jsonl
-monte-carlo: $(STAMP) $(PLOTS) $(if $(filter dask,$(EXECUTOR)),$(CAMPAIGNS))
+monte-carlo: $(STAMP) $(PLOTS) $(TABLES) $(if $(filter dask,$(EXECUTOR)),$(CAMPAIGNS))
 	$(VENV)/bin/daddy_campaign run --case $(DEMO_CASE) --runs $(or $(RUNS),100) \
 	  --out $(MC_OUT) --overwrite --executor $(or $(EXECUTOR),local) \
 	  $(if $(JOBS),--jobs $(JOBS)) --plot $(MC_OUT:.jsonl=.png)

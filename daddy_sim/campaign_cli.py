@@ -3,14 +3,17 @@
     daddy_campaign run [CAMPAIGN.yaml] [--case C] [--runs N] [--first-seed S] [--out F.jsonl]
                        [--executor local|dask] [--jobs J] [--scheduler tcp://HOST:PORT]
     daddy_campaign run --resume F.jsonl        # the seeds not yet in F, same config
-    daddy_campaign summary F.jsonl [--json]
+    daddy_campaign summary F.jsonl|F.parquet [--json]
     daddy_campaign merge A.jsonl B.jsonl -o C.jsonl
-    daddy_campaign plot F.jsonl [-o F.png]
-    daddy_campaign predict F.jsonl|CAMPAIGN.yaml [--samples N] [--plot P.png]
+    daddy_campaign export F.jsonl [-o F.parquet]   # or F.parquet -o F.jsonl
+    daddy_campaign plot F.jsonl|F.parquet [-o F.png]
+    daddy_campaign predict F.jsonl|F.parquet|CAMPAIGN.yaml [--samples N] [--plot P.png]
 
 A campaign file holds the sections of ``campaigns.CampaignConfig`` (any omitted field takes its
 default; the defaults are ``make monte-carlo``'s). Every finished run is appended to the results
-file at once, so an interrupted campaign resumes where it stopped.
+file at once, so an interrupted campaign resumes where it stopped; when the campaign (or a merge)
+ends, the whole file is also written as a Parquet table beside it (``campaign_table``; with
+pyarrow, the tables extra).
 """
 from __future__ import annotations
 
@@ -24,7 +27,8 @@ from pathlib import Path
 
 from .campaign_executors import Executor, check_executor, open_executor
 from .campaign_results import (Header, Results, ResultsWriter, format_summary, merge_results,
-                               package_version, read_results, summarise)
+                               package_version, read_results, summarise, write_results)
+from .campaign_table import TABLE_SUFFIX, load_results, table_path, write_table
 from .campaigns import (CampaignConfig, CampaignError, check_case, load_config,
                         read_config_data, run_campaign)
 
@@ -38,10 +42,11 @@ def open_loop_header(config: CampaignConfig) -> Header:
 
 
 def execute(writer: ResultsWriter, config: CampaignConfig, executor: Executor, jobs: int,
-            scheduler: str = "", out=print) -> int:
+            scheduler: str = "", out=print, bar: bool = False) -> int:
     """Run the seeds of ``config`` that ``writer``'s file lacks, appending each record as it
-    finishes; ``out`` gets the executor's description and a progress line per run. Returns
-    the number of runs made."""
+    finishes; ``out`` gets the executor's description and a progress line per run, or, with
+    ``bar`` (and tqdm installed), a progress bar on stderr with the ETA and the success so far
+    replaces the lines of the runs that succeed. Returns the number of runs made."""
     todo = [s for s in config.seeds if s not in writer.recorded]
     if not todo:
         out(f"{writer.path}: all {len(config.seeds)} seeds already recorded")
@@ -51,14 +56,32 @@ def execute(writer: ResultsWriter, config: CampaignConfig, executor: Executor, j
                        scheduler) as (pool, what):
         out(f"{len(todo)} runs on {what}" + (f" ({already} already in {writer.path})"
                                               if already else "") + f" -> {writer.path}")
+        progress = _progress_bar(len(config.seeds), already) if bar else None
         t0, ok = time.perf_counter(), 0
         for i, rec in enumerate(run_campaign(config, todo, pool), 1):
             writer.append(rec)
             ok += rec.success
+            if progress is not None:
+                if not rec.success:
+                    progress.write(rec.line())
+                progress.set_postfix_str(f"success {ok}/{i}", refresh=False)
+                progress.update()
+                continue
             eta = (time.perf_counter() - t0) / i * (len(todo) - i)
             out(f"[{already + i}/{len(config.seeds)}] {rec.line()} | success {ok}/{i} "
                 f"| ETA {_duration(eta)}")
+        if progress is not None:
+            progress.close()
     return len(todo)
+
+
+def _progress_bar(total: int, already: int):
+    """A tqdm bar on stderr, or None without tqdm (the campaigns extra)."""
+    try:
+        from tqdm import tqdm
+    except ImportError:
+        return None
+    return tqdm(total=total, initial=already, unit="run", dynamic_ncols=True, smoothing=0.1)
 
 
 def _duration(s: float) -> str:
@@ -109,6 +132,7 @@ def _cmd_run(args) -> int:
                              args.scheduler)
     if results is None:
         return 130
+    _table_beside(results, writer.path)
     if args.plot:
         _plot(results, args.plot)
     return 0
@@ -122,7 +146,7 @@ def run_and_report(writer: ResultsWriter, config: CampaignConfig, executor: Exec
     with writer:
         try:
             execute(writer, config, executor, jobs, scheduler,
-                    out=lambda s: print(s, flush=True))
+                    out=lambda s: print(s, flush=True), bar=sys.stderr.isatty())
         except KeyboardInterrupt:
             print(f"\ninterrupted: {len(writer.recorded)} runs in {writer.path}; continue with "
                   f"daddy_campaign run --resume {writer.path}", flush=True)
@@ -133,8 +157,16 @@ def run_and_report(writer: ResultsWriter, config: CampaignConfig, executor: Exec
     return results
 
 
+def _table_beside(results: Results, path) -> None:
+    """The Parquet table of a JSONL results file, beside it; a note without pyarrow."""
+    try:
+        print(f"table: {write_table(results, table_path(path))}")
+    except CampaignError as exc:
+        print(f"table skipped: {exc}")
+
+
 def _cmd_summary(args) -> int:
-    results = read_results(args.file)
+    results = load_results(args.file)
     s = summarise(results)
     if args.json:
         print(json.dumps(_jsonable(asdict(s)), indent=1))
@@ -159,11 +191,32 @@ def _cmd_merge(args) -> int:
     results, dropped = merge_results(args.files, args.output, overwrite=args.overwrite)
     print(f"{args.output}: {len(results.records)} runs from {len(args.files)} files"
           + (f" ({dropped} duplicate seeds kept once)" if dropped else ""))
+    _table_beside(results, args.output)
+    return 0
+
+
+def _cmd_export(args) -> int:
+    """JSONL -> Parquet table (default: beside it), or a table back to JSONL (-o)."""
+    src = Path(args.file)
+    results = load_results(src)
+    if src.suffix == TABLE_SUFFIX:
+        if not args.output:
+            raise CampaignError("export: -o F.jsonl, where to write the table's runs")
+        write_results(results, args.output, overwrite=args.overwrite)
+        dst = args.output
+    else:
+        dst = args.output or table_path(src)
+        if Path(dst).suffix != TABLE_SUFFIX:
+            raise CampaignError(f"export -o {dst}: a table is written as {TABLE_SUFFIX}")
+        if Path(dst).exists() and not args.overwrite:
+            raise CampaignError(f"export -o {dst}: exists (--overwrite to replace it)")
+        write_table(results, dst)
+    print(f"{dst}: {len(results.records)} runs")
     return 0
 
 
 def _cmd_plot(args) -> int:
-    results = read_results(args.file)
+    results = load_results(args.file)
     return _plot(results, args.output or str(Path(args.file).with_suffix(".png")))
 
 
@@ -174,8 +227,8 @@ def _cmd_predict(args) -> int:
 
     from .campaign_prediction import AXES, compare, format_comparison, plot_comparison, predict
     source = Path(args.source)
-    if source.suffix == ".jsonl":
-        results = read_results(source)
+    if source.suffix in (".jsonl", TABLE_SUFFIX):
+        results = load_results(source)
         config = results.header.config
         runs = np.array([r.deviation_si for r in results.records if len(r.deviation_si) == 6])
         cpu = sum(r.cpu_s for r in results.records)
@@ -242,14 +295,21 @@ def build_parser() -> argparse.ArgumentParser:
     mg.add_argument("-o", "--output", required=True)
     mg.add_argument("--overwrite", action="store_true")
     mg.set_defaults(func=_cmd_merge)
-    pl = sub.add_parser("plot", help="PNG of a results file: miss scatter, propellant, latency")
+    ex = sub.add_parser("export", help="a results file as a Parquet table (or a table back "
+                                       "to JSON Lines)")
+    ex.add_argument("file", help="F.jsonl, or F.parquet")
+    ex.add_argument("-o", "--output", help="F.parquet (default: beside F.jsonl), or F.jsonl")
+    ex.add_argument("--overwrite", action="store_true")
+    ex.set_defaults(func=_cmd_export)
+    pl = sub.add_parser("plot", help="PNG of a results file: miss scatter, propellant, latency, "
+                                     "terminal deviations with their ellipses")
     pl.add_argument("file")
     pl.add_argument("-o", "--output", help="PNG (default: the results file's name .png)")
     pl.set_defaults(func=_cmd_plot)
     pr = sub.add_parser("predict", help="the terminal dispersion predicted on the linearised "
                                         "closed loop, beside a results file's runs")
-    pr.add_argument("source", help="a results file (.jsonl: compared with its runs) or a "
-                                   "campaign file")
+    pr.add_argument("source", help="a results file (.jsonl or .parquet: compared with its "
+                                   "runs) or a campaign file")
     pr.add_argument("--samples", type=int, default=20_000,
                     help="draws of the linearised loop (default 20000)")
     pr.add_argument("--seed", type=int, default=0)

@@ -310,6 +310,8 @@ def plot_comparison(prediction: Prediction, deviations_si: np.ndarray, path) -> 
     import matplotlib
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
+
+    from .campaign_plot import ellipse
     d = np.asarray(deviations_si, float)
     fig, axes = plt.subplots(1, 4, figsize=(18, 4.6))
     for ax, (i, j) in zip(axes, ((0, 1), (0, 2), (3, 4), (3, 5))):
@@ -317,7 +319,7 @@ def plot_comparison(prediction: Prediction, deviations_si: np.ndarray, path) -> 
         for cov, colour, name in ((np.cov(d, rowvar=False), "tab:blue", "runs' covariance"),
                                   (prediction.cov_si, "tab:orange", "predicted")):
             for k, style in ((1, "-"), (3, "--")):
-                x, y = _ellipse(cov[np.ix_([i, j], [i, j])], k)
+                x, y = ellipse(cov[np.ix_([i, j], [i, j])], k)
                 ax.plot(x, y, style, color=colour,
                         label=f"{name}, {k} sigma")
         ax.set_xlabel(AXES[i])
@@ -328,10 +330,3 @@ def plot_comparison(prediction: Prediction, deviations_si: np.ndarray, path) -> 
     fig.tight_layout()
     fig.savefig(path, dpi=110)
     plt.close(fig)
-
-
-def _ellipse(cov: np.ndarray, k: float, n: int = 200) -> tuple[np.ndarray, np.ndarray]:
-    w, v = np.linalg.eigh(cov)
-    a = np.linspace(0, 2 * np.pi, n)
-    pts = v @ (k * np.sqrt(np.maximum(w, 0.0))[:, None] * np.vstack([np.cos(a), np.sin(a)]))
-    return pts[0], pts[1]

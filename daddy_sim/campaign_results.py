@@ -180,10 +180,17 @@ def merge_results(paths, out, overwrite: bool = False) -> tuple[Results, int]:
     dropped = sum(len(r.records) for r in parts) - len(records)
     seeds = tuple(sorted(seen))
     header = replace(first.header, config=replace(first.header.config, seeds=seeds))
-    with ResultsWriter.create(out, header, overwrite=overwrite) as w:
-        for rec in records:
+    merged = Results(header, tuple(records))
+    write_results(merged, out, overwrite=overwrite)
+    return merged, dropped
+
+
+def write_results(results: Results, path, overwrite: bool = False) -> None:
+    """Write ``results`` as a new JSON Lines results file (refusing to replace one unless
+    ``overwrite``)."""
+    with ResultsWriter.create(path, results.header, overwrite=overwrite) as w:
+        for rec in results.records:
             w.append(rec)
-    return Results(header, tuple(records)), dropped
 
 
 def _differences(a: dict, b: dict, prefix: str = "") -> str:
