@@ -77,11 +77,16 @@ def execute(writer: ResultsWriter, config: CampaignConfig, executor: Executor, j
 
 def _progress_bar(total: int, already: int):
     """A tqdm bar on stderr, or None without tqdm (the campaigns extra)."""
+    import shutil
     try:
         from tqdm import tqdm
     except ImportError:
         return None
-    return tqdm(total=total, initial=already, unit="run", dynamic_ncols=True, smoothing=0.1)
+    # (a terminal that reports no size, e.g. script(1)'s, gets 100 x 24: tqdm hides a bar
+    # on a terminal of no rows)
+    size = shutil.get_terminal_size((100, 24))
+    return tqdm(total=total, initial=already, unit="run", smoothing=0.1, ncols=size.columns,
+                nrows=size.lines)
 
 
 def _duration(s: float) -> str:

@@ -333,6 +333,13 @@ def test_resume_after_the_campaign_is_killed(tmp_path):
     after = read_results(out).records
     assert sorted(r.seed for r in after) == list(range(1, 9))
     assert after[:len(before)] == before
+    try:   # the resumed campaign's table: the whole file, both parts
+        from daddy_sim.campaign_table import read_table
+        table = read_table(out.with_suffix(".parquet"))
+    except CampaignError as exc:
+        assert "tables extra" in str(exc)
+    else:
+        assert [r.seed for r in table.records] == [r.seed for r in after]
 
 
 def test_gnc_demo_runs_is_a_campaign(tmp_path, capsys):
