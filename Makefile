@@ -12,7 +12,7 @@ STAMP := $(VENV)/.bootstrapped
 PLOTS := $(VENV)/.plots
 RECORD := $(VENV)/.record
 CAMPAIGNS := $(VENV)/.campaigns
-TABLES := $(VENV)/.tables
+ANALYSIS := $(VENV)/.analysis
 INTERFACES := $(VENV)/.interfaces
 PIP := $(PY) -m pip install --disable-pip-version-check -q -c requirements/pins.txt
 
@@ -70,17 +70,17 @@ $(CAMPAIGNS): $(STAMP) requirements/campaigns.txt
 	@$(PIP) -r requirements/campaigns.txt && touch $@ || \
 	  echo "campaigns: dask could not be installed; --executor dask will say so"
 
-# The tables extra (pyarrow, pandas): a campaign's results as a Parquet table; the tests read it
-# with pandas.
-$(TABLES): $(STAMP) requirements/tables.txt
-	@$(PIP) -r requirements/tables.txt && touch $@ || \
-	  echo "tables: pyarrow could not be installed; campaigns will write no Parquet table"
+# The analysis extra (pyarrow, pandas, oem): a campaign's results as a Parquet table, read with
+# pandas, and exported OEMs read back by the oem package, in the tests.
+$(ANALYSIS): $(STAMP) requirements/analysis.txt
+	@$(PIP) -r requirements/analysis.txt && touch $@ || \
+	  echo "analysis: pyarrow could not be installed; campaigns will write no Parquet table"
 
 DEMO_CASE ?= halo_l2_l1
 demo: $(STAMP) $(PLOTS) $(INTERFACES)
 	$(VENV)/bin/gnc_demo --case $(DEMO_CASE)
 
-test: $(STAMP) $(PLOTS) $(RECORD) $(CAMPAIGNS) $(TABLES) $(INTERFACES)
+test: $(STAMP) $(PLOTS) $(RECORD) $(CAMPAIGNS) $(ANALYSIS) $(INTERFACES)
 	$(PY) -m pytest -q test
 
 test-slow: $(STAMP)
@@ -89,7 +89,7 @@ test-slow: $(STAMP)
 # a dispersion campaign of the demo's loop: results file, summary and plot in out/
 # (EXECUTOR=dask: on a loopback Dask LocalCluster; JOBS: workers)
 MC_OUT := out/monte-carlo-$(DEMO_CASE).jsonl
-monte-carlo: $(STAMP) $(PLOTS) $(TABLES) $(if $(filter dask,$(EXECUTOR)),$(CAMPAIGNS))
+monte-carlo: $(STAMP) $(PLOTS) $(ANALYSIS) $(if $(filter dask,$(EXECUTOR)),$(CAMPAIGNS))
 	$(VENV)/bin/daddy_campaign run --case $(DEMO_CASE) --runs $(or $(RUNS),100) \
 	  --out $(MC_OUT) --overwrite --executor $(or $(EXECUTOR),local) \
 	  $(if $(JOBS),--jobs $(JOBS)) --plot $(MC_OUT:.jsonl=.png)

@@ -23,7 +23,7 @@ setup(
     install_requires=["setuptools", "numpy", "scipy"],
     extras_require={"plots": ["matplotlib"], "record": ["mcap", "mcap-ros2-support"],
                     "campaigns": ["dask", "distributed", "tqdm"],
-                    "tables": ["pyarrow", "pandas"]},
+                    "analysis": ["pyarrow", "pandas", "oem"]},
     zip_safe=True,
     maintainer="daddy team",
     maintainer_email="daddy@example.invalid",

@@ -58,14 +58,7 @@ def _parser() -> argparse.ArgumentParser:
                         "one solve (a case file's problem.revolutions_window)")
     s.add_argument("--json", metavar="FILE", help="write the solution as JSON")
     s.add_argument("--npz", metavar="FILE", help="write the solution as NPZ")
-    s.add_argument("--csv", metavar="FILE", help="write the trajectory as CSV (node times, SI "
-                   "states, Earth-centred cases' elements, thrust)")
-    s.add_argument("--oem", metavar="FILE", help="Earth-centred cases: write a CCSDS OEM "
-                   "(EME2000, km, km/s)")
-    s.add_argument("--epoch", type=_utc, default=None, metavar="ISO",
-                   help="start epoch of the OEM, UTC (default J2000, 2000-01-01T12:00:00)")
-    s.add_argument("--plot", metavar="FILE", help="write a PNG of the trajectory and thrust "
-                   "(needs matplotlib)")
+    _output_arguments(s)
     s.add_argument("--globalization", choices=[g.value for g in Globalization],
                    help="DDP step control (default: the solver's)")
     s.add_argument("--time-budget", type=float, metavar="S", help="wall-clock budget in seconds")
@@ -86,6 +79,10 @@ def _parser() -> argparse.ArgumentParser:
                    help="--parametrisation costate: the throttle sharpness rho of each "
                         "continuation step")
     s.add_argument("--quiet", action="store_true", help="no progress lines")
+    e = sub.add_parser("export", help="a solution file (daddy solve --json) as CSV, OEM or "
+                       "the mission plot, without solving again")
+    e.add_argument("solution", help="a solution JSON file")
+    _output_arguments(e)
     sub.add_parser("list", help="list the catalogue cases")
     q = sub.add_parser("predict", help="a case's terminal dispersion from an initial-state "
                        "error: DA prediction beside a Monte Carlo (docs/policies.md)")
@@ -100,6 +97,62 @@ def _parser() -> argparse.ArgumentParser:
     q.add_argument("--samples", type=int, default=2000, help="Monte Carlo flights")
     q.add_argument("--seed", type=int, default=1)
     return ap
+
+
+def _output_arguments(p: argparse.ArgumentParser) -> None:
+    """The files a solution is written to (``daddy solve`` and ``daddy export``)."""
+    p.add_argument("--csv", metavar="FILE", help="write the trajectory as CSV (node times, SI "
+                   "states, Earth-centred cases' elements, thrust)")
+    p.add_argument("--oem", metavar="FILE", help="write a CCSDS OEM 2.0 (km, km/s): EME2000 "
+                   "(Earth-centred), ecliptic J2000 (Sun-centred), the Earth-Moon frame "
+                   "--oem-frame (CR3BP)")
+    p.add_argument("--oem-frame", choices=[f.value for f in trajectory_output.OemFrame],
+                   default=trajectory_output.OemFrame.INERTIAL.value,
+                   help="CR3BP cases: the OEM's frame (default inertial: the rotating frame's "
+                        "axes at the epoch)")
+    p.add_argument("--epoch", type=_utc, default=None, metavar="ISO",
+                   help="start epoch of the OEM, UTC (default J2000, 2000-01-01T12:00:00)")
+    p.add_argument("--plot", metavar="FILE", help="write a PNG: the mission plot (3-D "
+                   "trajectory with the bodies to scale, thrust arrows, thrust, mass and orbit "
+                   "histories; needs matplotlib)")
+
+
+def _write_outputs(sol: Solution, args, case=None, u_max_n: float | None = None) -> None:
+    """The --csv, --oem and --plot files of a thrust solution."""
+    if args.csv:
+        trajectory_output.write_csv(sol, args.csv)
+    if args.oem:
+        trajectory_output.write_oem(sol, args.oem, args.epoch or trajectory_output.J2000,
+                                    frame=trajectory_output.OemFrame(args.oem_frame))
+    if args.plot:
+        if sol.units.get("system") in trajectory_output.OEM_SYSTEMS:
+            from .mission_plot import plot_mission
+            plot_mission(sol, args.plot, case=case, u_max_n=u_max_n)
+        else:
+            from .plotting import plot_solution
+            plot_solution(sol, args.plot, u_max_n=u_max_n)
+
+
+def _export(args) -> int:
+    """``daddy export``: a saved solution's files."""
+    try:
+        sol = Solution.from_json(args.solution)
+        try:
+            case = load_case(sol.case)
+        except DaddyError:
+            case = None   # a case file no longer at hand: no departure/arrival orbits
+        u_max = (case.spacecraft.max_thrust_n if case is not None and
+                 getattr(case, "spacecraft", None) is not None else None)
+        if not (args.csv or args.oem or args.plot):
+            raise DaddyError("export: give --csv, --oem or --plot")
+        _write_outputs(sol, args, case, u_max)
+    except (DaddyError, OSError) as exc:
+        print(f"daddy: error: {exc}", file=sys.stderr)
+        return 2
+    for what, f in (("csv", args.csv), ("oem", args.oem), ("plot", args.plot)):
+        if f:
+            print(f"{what}: {f}")
+    return 0
 
 
 def _utc(text: str) -> datetime:
@@ -126,6 +179,8 @@ def main(argv=None) -> int:
         return 0
     if args.command == "predict":
         return _predict(args)
+    if args.command == "export":
+        return _export(args)
     try:
         case = load_case(args.case)
         if isinstance(case, SailCase):
@@ -136,9 +191,9 @@ def main(argv=None) -> int:
         if Parametrisation(args.parametrisation) is Parametrisation.COSTATE:
             return _solve_costate(case, args)
         args.method = args.method or "dyn"
-        if args.oem and not case.staged_in_angle:
-            raise DaddyError(f"--oem: an OEM is for Earth-centred cases; {case.name!r} is "
-                             f"{case.system} (write --csv instead)")
+        if args.oem:
+            trajectory_output.check_oem(case.units.name,
+                                        trajectory_output.OemFrame(args.oem_frame), case.name)
         fuel = not args.energy and case.system != "double_integrator"
         if args.fuel:
             fuel = True
@@ -190,14 +245,8 @@ def main(argv=None) -> int:
         sol.to_json(args.json)
     if args.npz:
         sol.to_npz(args.npz)
-    if args.csv:
-        trajectory_output.write_csv(sol, args.csv)
-    if args.oem:
-        trajectory_output.write_oem(sol, args.oem, args.epoch or trajectory_output.J2000)
-    if args.plot:
-        from .plotting import plot_solution
-        plot_solution(sol, args.plot, u_max_n=problem.u_max and float(
-            case.units.thrust_n(problem.u_max)))
+    _write_outputs(sol, args, case, u_max_n=problem.u_max and float(
+        case.units.thrust_n(problem.u_max)))
     if not sol.converged:
         print(f"daddy: not converged: {sol.reason}", file=sys.stderr)
         return 1
@@ -238,7 +287,10 @@ def _solve_costate(case, args) -> int:
         ("--method", args.method), ("--energy", args.energy), ("--warm-start", args.warm_start),
         ("--r-min-km", args.r_min_km), ("--search-revolutions", args.search_revolutions),
         ("--free-tof", args.free_tof), ("--free-revolutions", args.free_revolutions),
-        ("--policy", args.policy), ("--oem", args.oem)) if given]
+        ("--policy", args.policy)) if given]
+    if args.no_polish and (args.oem or args.plot or args.csv):
+        raise DaddyError("--csv, --oem, --plot: the polished thrust solution's; not with "
+                         "--no-polish (the PDDP solution's controls are costates: --json)")
     if refused:
         raise DaddyError(f"{', '.join(refused)}: not with --parametrisation costate (PDDP "
                          "solves the fuel-optimal transfer over costates, hessdyn)")
@@ -268,11 +320,7 @@ def _solve_costate(case, args) -> int:
         Path(args.json).write_text(json.dumps(d, indent=1, allow_nan=False))
     if args.npz:
         sol.to_npz(args.npz)
-    if args.csv:
-        trajectory_output.write_csv(sol, args.csv)
-    if args.plot:
-        from .plotting import plot_solution
-        plot_solution(sol, args.plot, u_max_n=case.spacecraft.max_thrust_n)
+    _write_outputs(sol, args, case, u_max_n=case.spacecraft.max_thrust_n)
     if not sol.converged:
         print(f"daddy: not converged: {sol.reason}", file=sys.stderr)
         return 1
@@ -314,7 +362,8 @@ def _solve_sail(case: SailCase, args) -> int:
     if args.csv:
         write_sail_csv(result, args.csv)
     if args.oem:
-        trajectory_output.write_oem(sol, args.oem, args.epoch or _case_epoch(case))
+        trajectory_output.write_oem(sol, args.oem, args.epoch or _case_epoch(case),
+                                    frame=trajectory_output.OemFrame(args.oem_frame))
     if args.plot:
         from .plotting import plot_sail
         plot_sail(result, args.plot)

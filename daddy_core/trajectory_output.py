@@ -1,14 +1,29 @@
 """A solved trajectory in the forms a mission designer uses: node times, Earth-centred states as
 Cartesian ECI and as Keplerian elements, a CSV of every node for any case, and a CCSDS Orbit
-Ephemeris Message (OEM, plain text) for Earth-centred transfers.
+Ephemeris Message (OEM 2.0, plain text) for every system with a frame in space.
 
 Earth-centred solutions hold modified equinoctial elements staged in true longitude
 (``models.equinoctial_sundman``): node k lies at the true longitude t_start + the stage angles
 before it, its time is the state's time component. Other solutions are staged in time and their
 states are Cartesian already.
+
+The OEM's frame per system (``oem_segment``):
+
+| system | CENTER_NAME | REF_FRAME |
+|---|---|---|
+| Earth-centred (equinoctial, sail) | EARTH | EME2000 (the frame of the elements) |
+| Sun-centred two-body | SUN | ECLIPJ2000: the paper's states are ecliptic J2000 (interpreted: its Table 3 lists the planets' z within 1e-4 AU of 0) |
+| Earth-Moon CR3BP, inertial (default) | EARTH-MOON BARYCENTER | EMB_INERTIAL: the rotating frame's axes at REF_FRAME_EPOCH, held fixed |
+| Earth-Moon CR3BP, rotating | EARTH-MOON BARYCENTER | EMB_ROTATING: x from the Earth to the Moon, z along their orbit's angular momentum |
+
+The CR3BP frames are not in the CCSDS/SANA registry (the model's Moon moves on a circle, so no
+ephemeris frame is exact for it): their definitions are in the file's COMMENT lines. The
+inertial conversion turns the rotating frame about z at the model's mean motion n = 1 / TU:
+r_I = R_z(n t) r, v_I = R_z(n t) (v + n z x r).
 """
 from __future__ import annotations
 
+import enum
 import math
 from datetime import datetime, timedelta, timezone
 from pathlib import Path
@@ -169,16 +184,76 @@ def write_rows(header: list[str], rows: np.ndarray, path: str | Path,
     Path(path).write_text("\n".join(lines) + "\n")
 
 
-def write_oem(sol, path: str | Path, epoch: datetime = J2000, object_name: str | None = None) -> None:
-    """A CCSDS OEM 2.0 (KVN) of an Earth-centred solution: one segment, EME2000, UTC, the node
-    states in km and km/s at the start epoch + the node times."""
-    if not is_earth_centred(sol):
-        raise DaddyError(f"an OEM is for Earth-centred solutions (systems {EARTH_SYSTEMS}); "
-                         f"{sol.case!r} is not one: write its CSV instead")
+class OemFrame(str, enum.Enum):
+    """The frame of a CR3BP solution's OEM (module docstring); other systems have one."""
+
+    INERTIAL = "inertial"
+    ROTATING = "rotating"
+
+    __str__ = str.__str__
+
+
+def rotating_to_inertial_si(X_si: np.ndarray, t_s: np.ndarray, tu_s: float) -> np.ndarray:
+    """(K, 6) CR3BP states [m, m/s] in the rotating frame at times ``t_s`` [s] since the epoch
+    -> the inertial frame whose axes are the rotating frame's at the epoch (module
+    docstring); the mean motion is 1 / ``tu_s`` [rad/s]."""
+    X_si, n = np.asarray(X_si, float), 1.0 / tu_s
+    theta = n * np.asarray(t_s, float)
+    c, s = np.cos(theta), np.sin(theta)
+    r, v = X_si[:, :3], X_si[:, 3:6]
+    v = v + n * np.column_stack([-r[:, 1], r[:, 0], np.zeros(len(r))])   # + n z x r
+
+    def rot(a):
+        return np.column_stack([c * a[:, 0] - s * a[:, 1], s * a[:, 0] + c * a[:, 1], a[:, 2]])
+    return np.column_stack([rot(r), rot(v)])
+
+
+def oem_segment(sol, frame: OemFrame = OemFrame.INERTIAL) -> tuple[str, str, list, np.ndarray]:
+    """(CENTER_NAME, REF_FRAME, COMMENT lines, (N+1, 6) node states [km, km/s]) of a solution's
+    OEM (the module docstring's table). Raises DaddyError for a system without a frame in
+    space (the double integrator), or a rotating frame asked of a system without one."""
+    system = sol.units.get("system")
+    check_oem(system, frame, sol.case)
+    if is_earth_centred(sol):
+        return "EARTH", "EME2000", [], earth_cartesian_si(sol)[:, :6] / 1000.0
+    if system == "sun_two_body":
+        return ("SUN", "ECLIPJ2000", ["ecliptic and mean equinox of J2000, Sun-centred (the "
+                                      "case's states)"], sol.X_si[:, :6] / 1000.0)
+    units = Units.from_dict(sol.units)   # the Earth-Moon CR3BP
+    lines = [f"Earth-Moon CR3BP (mass ratio {units.gm:.10g}, Earth-Moon distance "
+             f"{units.lu_km:g} km, mean motion {1.0 / units.tu_s:.10e} rad/s), origin the "
+             "barycentre", "EMB_ROTATING: x from the Earth to the Moon, z along their "
+             "orbit's angular momentum, y completing the right-handed frame"]
+    rv = sol.X_si[:, :6]
+    if frame is OemFrame.INERTIAL:
+        lines.append("EMB_INERTIAL: the axes of EMB_ROTATING at REF_FRAME_EPOCH, held fixed"
+                     " (r_I = R_z(n t) r, v_I = R_z(n t) (v + n z x r))")
+        rv = rotating_to_inertial_si(rv, node_times_s(sol), units.tu_s)
+    return ("EARTH-MOON BARYCENTER", f"EMB_{frame.name}", lines, rv / 1000.0)
+
+
+OEM_SYSTEMS = (*EARTH_SYSTEMS, "sun_two_body", "earth_moon_cr3bp")
+
+
+def check_oem(system: str, frame: OemFrame, case: str) -> None:
+    """Raises DaddyError unless ``system`` has an OEM in ``frame``."""
+    if system not in OEM_SYSTEMS:
+        raise DaddyError(f"an OEM needs a frame in space; {case!r} is {system}: write its CSV "
+                         "instead")
+    if frame is OemFrame.ROTATING and system != "earth_moon_cr3bp":
+        raise DaddyError(f"OEM frame {frame}: only Earth-Moon CR3BP solutions have a rotating "
+                         f"frame ({case!r} is {system})")
+
+
+def write_oem(sol, path: str | Path, epoch: datetime = J2000, object_name: str | None = None,
+              frame: OemFrame = OemFrame.INERTIAL) -> None:
+    """A CCSDS OEM 2.0 (KVN) of a solution: one segment, UTC, the node states in km and km/s
+    at the start epoch + the node times, in the system's frame (``oem_segment``; a CR3BP
+    solution's inertial or rotating frame)."""
     if epoch.tzinfo is None:
         epoch = epoch.replace(tzinfo=timezone.utc)
+    center, ref_frame, notes, rv = oem_segment(sol, frame)
     t = node_times_s(sol)
-    rv = earth_cartesian_si(sol)[:, :6] / 1000.0
 
     def stamp(s: float) -> str:
         return (epoch + timedelta(seconds=float(s))).strftime("%Y-%m-%dT%H:%M:%S.%f")
@@ -187,9 +262,10 @@ def write_oem(sol, path: str | Path, epoch: datetime = J2000, object_name: str |
     lines = ["CCSDS_OEM_VERS = 2.0",
              f"CREATION_DATE = {datetime.now(timezone.utc).strftime('%Y-%m-%dT%H:%M:%S')}",
              "ORIGINATOR = daddy", "", "META_START", f"OBJECT_NAME = {name}",
-             f"OBJECT_ID = {name}", "CENTER_NAME = EARTH", "REF_FRAME = EME2000",
+             f"OBJECT_ID = {name}", f"CENTER_NAME = {center}", f"REF_FRAME = {ref_frame}",
+             *([f"REF_FRAME_EPOCH = {stamp(t[0])}"] if ref_frame == "EMB_INERTIAL" else []),
              "TIME_SYSTEM = UTC", f"START_TIME = {stamp(t[0])}", f"STOP_TIME = {stamp(t[-1])}",
-             "META_STOP", "",
+             "META_STOP", "", *(f"COMMENT {line}" for line in notes),
              f"COMMENT {sol.method} {'fuel' if sol.fuel_optimal else 'energy'}-optimal, "
              f"converged {sol.converged}"
              + ("" if sol.final_mass_kg is None else f", final mass {sol.final_mass_kg:.3f} kg")]

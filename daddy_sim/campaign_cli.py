@@ -13,7 +13,7 @@ A campaign file holds the sections of ``campaigns.CampaignConfig`` (any omitted 
 default; the defaults are ``make monte-carlo``'s). Every finished run is appended to the results
 file at once, so an interrupted campaign resumes where it stopped; when the campaign (or a merge)
 ends, the whole file is also written as a Parquet table beside it (``campaign_table``; with
-pyarrow, the tables extra).
+pyarrow, the analysis extra).
 """
 from __future__ import annotations
 

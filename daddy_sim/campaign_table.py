@@ -11,7 +11,7 @@ with r_t, v_t the case's target state about the frame's origin (the barycentre o
 system, the central body's centre otherwise). Cases that arrive on an orbit rather than at a
 state (staged in angle) have no terminal-state columns (NaN).
 
-The Parquet file (pyarrow, the ``tables`` extra) carries the results header as file metadata
+The Parquet file (pyarrow, the ``analysis`` extra) carries the results header as file metadata
 (key ``daddy.campaign.header``: the JSON of the JSONL file's first line) and two list columns,
 every re-plan's latency and every served law's evaluation time, so that a table reads back
 into the same run records (``read_table``): JSONL -> Parquet -> JSONL round-trips exactly.
@@ -152,8 +152,8 @@ def _pyarrow():
         import pyarrow
         import pyarrow.parquet
     except ImportError:
-        raise CampaignError("Parquet needs pyarrow (the tables extra: pip install "
-                            "'daddy_ros[tables]'; make test installs it)") from None
+        raise CampaignError("Parquet needs pyarrow (the analysis extra: pip install "
+                            "'daddy_ros[analysis]'; make test installs it)") from None
     return pyarrow
 
 

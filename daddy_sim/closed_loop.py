@@ -92,11 +92,16 @@ def fly(link, sim: TruthSim, planner: GuidancePlanner, policy: TriggerConfig, su
     ``flight_steps`` (its arrival phase from ``policy``), which re-plans where ``policy`` says
     (in the node, or in-process for a ``DirectLink``); the schedule is flown piecewise constant
     between its stage starts. Returns the run's figures, the flown positions at the grid's
-    times (``flown_m``, (K, 3) m) and the thrust actually applied (``thrust_log``: (t_s,
-    |thrust| N) from each piece on)."""
+    times (``flown_m``, (K, 3) m, and ``flown_v_m_s``, at ``times_s``, (K,) s on the mission
+    clock), each
+    estimate's navigation error (``nav_error_si``: (K - 1, 2) |estimate - truth| in position m
+    and velocity m/s) and the thrust actually applied (``thrust_log``: (t_s, |thrust| N) from
+    each piece on)."""
     N = planner.base_problem.N
     dt_stage = sim.tof_s / N
-    latencies, levels, flown, thrust_log = [], [], [sim.truth_si()[0]], []
+    latencies, levels, thrust_log = [], [], []
+    flown, flown_v = [sim.truth_si()[0]], [sim.truth_si()[1]]
+    times, nav = [sim.t_s], []
     triggered = 0
     link.truth(*sim.truth_si(), sim.t_s)
     link.estimate(*sim.estimate_si(), sim.t_s, "start")   # starts the policy's prediction
@@ -104,6 +109,8 @@ def fly(link, sim: TruthSim, planner: GuidancePlanner, policy: TriggerConfig, su
             sim.t_s, N, dt_stage, substeps, policy.arrival_stages,
             final_substeps or substeps, policy.arrival_min_step)):
         pos, vel, mass = sim.estimate_si()
+        true_pos, true_vel, _ = sim.truth_si()
+        nav.append((np.linalg.norm(pos - true_pos), np.linalg.norm(vel - true_vel)))
         out = link.estimate(pos, vel, mass, t0, f"r{j}")
         if out is not None:
             reason, level, lat = out
@@ -122,6 +129,8 @@ def fly(link, sim: TruthSim, planner: GuidancePlanner, policy: TriggerConfig, su
             thrust_log.append((a, float(np.linalg.norm(applied))))
             link.truth(*sim.truth_si(), sim.t_s)
         flown.append(sim.truth_si()[0])
+        flown_v.append(sim.truth_si()[1])
+        times.append(sim.t_s)
     miss_r, miss_v = sim.miss()
     m_final = sim.truth_si()[2]
     return {"miss_km": miss_r / 1e3, "miss_cm_s": miss_v * 100, "final_mass_kg": m_final,
@@ -130,7 +139,9 @@ def fly(link, sim: TruthSim, planner: GuidancePlanner, policy: TriggerConfig, su
             "laws_served": len(getattr(link, "served", ())),
             "law_eval_ms": [1e3 * s.evaluation_s for s in getattr(link, "served", ())],
             "latency_ms": [1e3 * x for x in latencies],
-            "levels": levels, "flown_m": np.array(flown), "thrust_log": np.array(thrust_log)}
+            "levels": levels, "flown_m": np.array(flown),
+            "flown_v_m_s": np.array(flown_v), "times_s": np.array(times),
+            "nav_error_si": np.array(nav), "thrust_log": np.array(thrust_log)}
 
 
 def nominal_planner(case: str, time_budget_s: float,

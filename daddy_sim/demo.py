@@ -317,15 +317,16 @@ def _ros_demo(args, config: CampaignConfig, planner, header: Header) -> int:
 
 def plot_closed_loop(r: dict, plan, path) -> None:
     """PNG of a closed-loop run against the open-loop ``plan`` it started from: the flown and
-    planned trajectories (x-y, km, the case's frame) and the thrust magnitude actually applied
-    (execution errors included) and planned, over days since departure.
+    planned trajectories (x-y, km, the case's frame), the thrust magnitude actually applied
+    (execution errors included) and planned, and the flown minus planned position and velocity
+    at the plan's nodes beside each estimate's navigation error, over days since departure.
 
     Raises ImportError without matplotlib (the plots extra)."""
     import matplotlib
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
     Path(path).parent.mkdir(parents=True, exist_ok=True)
-    fig, (a1, a2) = plt.subplots(1, 2, figsize=(11, 4.5))
+    fig, (a1, a2, a3) = plt.subplots(1, 3, figsize=(16, 4.6))
     exp3 = max(0, 3 * int(np.log10(np.max(np.abs(plan.states_si[:, :2])) / 1e3) // 3))
     scale = 1e3 * 10.0 ** exp3   # km, 10^3 km or 10^6 km: short tick labels
     unit = "km" if exp3 == 0 else f"$10^{exp3}$ km"
@@ -349,9 +350,42 @@ def plot_closed_loop(r: dict, plan, path) -> None:
     a2.set_xlabel("time since departure [d]")
     a2.set_ylabel("thrust [N]")
     a2.legend()
+    _deviation_panel(a3, r, plan)
     fig.tight_layout()
     fig.savefig(path, dpi=110)
     plt.close(fig)
+
+
+def plan_deviation(r: dict, plan) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """|flown - planned| at the plan's nodes the flight passed (the flight grid's times that
+    are node times): (days since the plan's epoch, position km, velocity cm/s), each (K,)."""
+    nodes = np.append(plan.stage_start_s, plan.end_s - plan.epoch_s) + plan.epoch_s
+    t = r["times_s"]
+    k = np.minimum(np.searchsorted(t, nodes - 1e-6), len(t) - 1)
+    hit = np.abs(t[k] - nodes) < 1e-6
+    dr = np.linalg.norm(r["flown_m"][k[hit]] - plan.states_si[hit, :3], axis=1) / 1e3
+    dv = np.linalg.norm(r["flown_v_m_s"][k[hit]] - plan.states_si[hit, 3:6], axis=1) * 100
+    return (nodes[hit] - plan.epoch_s) / 86400.0, dr, dv
+
+
+def _deviation_panel(ax, r: dict, plan) -> None:
+    """``plan_deviation`` beside each estimate's navigation error (log scales)."""
+    days, dr, dv = plan_deviation(r, plan)
+    nav = r["nav_error_si"]
+    te = (r["times_s"][:len(nav)] - plan.epoch_s) / 86400.0
+    ax.plot(te, nav[:, 0] / 1e3, ".", ms=2, color="0.7", label="navigation error, position")
+    ax.plot(days, dr, "-", color="tab:blue", label="flown - planned, position")
+    ax.set_yscale("log")
+    ax.set_ylabel("position [km]")
+    ax.set_xlabel("time since departure [d]")
+    ax.set_title("deviation from the open-loop plan", fontsize=10)
+    av = ax.twinx()
+    av.plot(days, dv, "-", color="tab:red", lw=0.8, label="flown - planned, velocity")
+    av.set_yscale("log")
+    av.set_ylabel("velocity [cm/s]", color="tab:red")
+    h1, l1 = ax.get_legend_handles_labels()
+    h2, l2 = av.get_legend_handles_labels()
+    ax.legend(h1 + h2, l1 + l2, fontsize=7, loc="lower right")
 
 
 if __name__ == "__main__":

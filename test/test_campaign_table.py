@@ -18,8 +18,8 @@ from daddy_sim.campaign_results import Header, ResultsWriter, read_results
 from daddy_sim.campaign_table import NAMES, columns, read_table, write_table
 from daddy_sim.campaigns import CampaignConfig, CampaignError, Dispersion, RunRecord, RunStatus
 
-pd = pytest.importorskip("pandas", reason="the tables extra (make test installs it)")
-pytest.importorskip("pyarrow", reason="the tables extra (make test installs it)")
+pd = pytest.importorskip("pandas", reason="the analysis extra (make test installs it)")
+pytest.importorskip("pyarrow", reason="the analysis extra (make test installs it)")
 
 DOCS = Path(__file__).resolve().parents[1] / "docs" / "campaigns.md"
 
@@ -153,7 +153,7 @@ def test_export_refusals_name_the_option(tmp_path, capsys):
 def test_without_pyarrow_the_table_is_skipped_and_says_how(tmp_path, monkeypatch):
     res = _results_file(tmp_path / "r.jsonl")
     monkeypatch.setitem(sys.modules, "pyarrow", None)
-    with pytest.raises(CampaignError, match=r"pip install 'daddy_ros\[tables\]'"):
+    with pytest.raises(CampaignError, match=r"pip install 'daddy_ros\[analysis\]'"):
         write_table(res, tmp_path / "r.parquet")
 
 

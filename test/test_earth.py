@@ -166,10 +166,14 @@ def test_a_leo_raise_with_j2_solves_and_matches_a_cartesian_propagation_with_j2(
         assert miss_m < worst_m if worst_m else miss_m > 1000.0, miss_m
 
 
-def test_cli_writes_earth_outputs_and_refuses_an_oem_elsewhere(tmp_path, capsys):
-    assert cli_main(["solve", "earth_mars", "--energy", "--oem", str(tmp_path / "x.oem"),
+def test_cli_refuses_an_oem_without_a_frame_in_space_before_solving(tmp_path, capsys):
+    assert cli_main(["solve", "double_integrator", "--oem", str(tmp_path / "x.oem"),
                      "--quiet"]) == 2
-    assert "OEM is for Earth-centred cases" in capsys.readouterr().err
+    assert "an OEM needs a frame in space" in capsys.readouterr().err
+    assert cli_main(["solve", "earth_mars", "--oem", str(tmp_path / "x.oem"), "--oem-frame",
+                     "rotating", "--quiet"]) == 2
+    assert "only Earth-Moon CR3BP solutions have a rotating frame" in capsys.readouterr().err
+    assert not (tmp_path / "x.oem").exists()
 
 
 def test_an_earth_case_is_checked_for_its_time_and_staging():

@@ -395,11 +395,22 @@ def test_a_plan_that_fails_its_repropagation_is_never_adopted(monkeypatch):
 def test_demo_plot_is_a_png_of_flown_and_planned(planner, tmp_path):
     """The demo's figure (matplotlib: the plots extra, installed by make demo / make test)."""
     pytest.importorskip("matplotlib")
-    from daddy_sim.demo import plot_closed_loop
+    from daddy_sim.demo import plan_deviation, plot_closed_loop
     plan = planner.plan
-    r = {"flown_m": plan.states_si[:, :3] * 1.001,
+    nodes = plan.epoch_s + np.append(plan.stage_start_s, plan.end_s - plan.epoch_s)
+    # a flight grid of two steps per stage, flown 0.1 % off the plan at every node
+    times = np.sort(np.concatenate([nodes, (nodes[:-1] + nodes[1:]) / 2]))
+    flown = np.array([np.interp(times, nodes, plan.states_si[:, j]) for j in range(6)]).T
+    r = {"flown_m": flown[:, :3] * 1.001, "flown_v_m_s": flown[:, 3:6] * 1.001,
+         "times_s": times, "nav_error_si": np.full((len(times) - 1, 2), [100.0, 1e-3]),
          "thrust_log": np.column_stack([plan.epoch_s + plan.stage_start_s,
                                         np.linalg.norm(plan.thrust_n, axis=1)])}
+    days, dr, dv = plan_deviation(r, plan)
+    assert len(days) == len(nodes) and days[0] == 0.0
+    np.testing.assert_allclose(dr, 1e-3 * np.linalg.norm(plan.states_si[:, :3], axis=1) / 1e3,
+                               rtol=1e-12)
+    np.testing.assert_allclose(dv, 1e-1 * np.linalg.norm(plan.states_si[:, 3:6], axis=1),
+                               rtol=1e-12)
     path = tmp_path / "out" / "demo.png"
     plot_closed_loop(r, plan, path)
     data = path.read_bytes()
