@@ -59,7 +59,7 @@ def _json(records) -> list:
 
 
 def test_pandas_reads_the_table_in_one_line_with_the_documented_columns(tmp_path):
-    src = _results_file(tmp_path / "r.jsonl")
+    _results_file(tmp_path / "r.jsonl")
     assert campaign_main(["export", str(tmp_path / "r.jsonl")]) == 0
     df = pd.read_parquet(tmp_path / "r.parquet")
     assert df.shape == (6, len(NAMES)) and tuple(df.columns) == NAMES
