@@ -30,6 +30,7 @@ SUN_RADIUS_KM = 695_700.0          # IAU 2015 nominal solar radius
 MAX_ARROWS = 36
 THRUST_ON = 0.5                    # a stage thrusts (switching structure) above this * u_max
 DENSE_STAGES = 400                 # beyond it an Earth-centred thrust panel shows duty cycles
+RAAN_MIN_INCLINATION_DEG = 0.1     # below it the node line, and so the RAAN, is not drawn
 
 
 def natural_frame(sol) -> tuple[np.ndarray, float, str]:
@@ -214,8 +215,17 @@ def plot_mission(sol, path, case=None, u_max_n: float | None = None) -> None:
         ae.set_ylabel("e", color="tab:green")
         a4 = fig.add_subplot(right[3], sharex=a1)
         a4.plot(x, el[:, 2], color="tab:red", lw=0.8, label="i")
-        a4.plot(x, np.degrees(np.unwrap(np.radians(el[:, 3]))), color="tab:cyan", lw=0.8,
-                label="RAAN")
+        raan = np.degrees(np.unwrap(np.radians(el[:, 3])))
+        defined = el[:, 2] > RAAN_MIN_INCLINATION_DEG   # (undefined on an equatorial orbit)
+        if defined.any():
+            a4.plot(x, np.where(defined, raan, np.nan), color="tab:cyan", lw=0.8,
+                    label=f"RAAN (where i > {RAAN_MIN_INCLINATION_DEG:g} deg)")
+        shown = np.concatenate([el[:, 2], raan[defined]])
+        lo_deg, hi_deg = float(shown.min()), float(shown.max())
+        if hi_deg - lo_deg < 1.0:   # round-off of a constant angle is not drawn as a change
+            mid = (lo_deg + hi_deg) / 2
+            a4.set_ylim(mid - 0.5, mid + 0.5)
+        a4.ticklabel_format(axis="y", useOffset=False)
         a4.set_ylabel("[deg]")
         a4.legend(fontsize=8)
         revs = np.concatenate([[0.0], np.cumsum(sol.stage_dt)]) / (2 * np.pi)
