@@ -13,6 +13,7 @@ PLOTS := $(VENV)/.plots
 RECORD := $(VENV)/.record
 CAMPAIGNS := $(VENV)/.campaigns
 ANALYSIS := $(VENV)/.analysis
+DOCS := $(VENV)/.docs
 INTERFACES := $(VENV)/.interfaces
 PIP := $(PY) -m pip install --disable-pip-version-check -q -c requirements/pins.txt
 
@@ -24,7 +25,7 @@ export ROS_DOMAIN_ID ?= $(shell echo $$(( $$$$ % 101 + 1 )))
 export ROS_LOG_DIR ?= $(shell mktemp -d /tmp/daddy-roslog.XXXXXX)
 export ROS_PYTHON_CHECK_FIELDS := 1
 
-.PHONY: interfaces demo test test-slow bench monte-carlo reliability robustness venv clean
+.PHONY: interfaces demo test test-slow bench monte-carlo reliability robustness venv clean docs docs-screenshot
 
 venv: $(STAMP)
 
@@ -76,11 +77,16 @@ $(ANALYSIS): $(STAMP) requirements/analysis.txt
 	@$(PIP) -r requirements/analysis.txt && touch $@ || \
 	  echo "analysis: pyarrow could not be installed; campaigns will write no Parquet table"
 
+# The docs extra (MkDocs, Material, mkdocstrings): the documentation site; the tests build it.
+$(DOCS): $(STAMP) requirements/docs.txt
+	@$(PIP) -r requirements/docs.txt && touch $@ || \
+	  echo "docs: mkdocs could not be installed; make docs cannot build the site"
+
 DEMO_CASE ?= halo_l2_l1
 demo: $(STAMP) $(PLOTS) $(INTERFACES)
 	$(VENV)/bin/gnc_demo --case $(DEMO_CASE)
 
-test: $(STAMP) $(PLOTS) $(RECORD) $(CAMPAIGNS) $(ANALYSIS) $(INTERFACES)
+test: $(STAMP) $(PLOTS) $(RECORD) $(CAMPAIGNS) $(ANALYSIS) $(DOCS) $(INTERFACES)
 	$(PY) -m pytest -q test
 
 test-slow: $(STAMP)
@@ -107,6 +113,15 @@ robustness: $(STAMP)
 
 bench: $(STAMP)
 	cd bench && ../$(PY) bench_da.py && ../$(PY) bench_solver.py && ../$(PY) bench_replan.py
+
+# the documentation site in out/site (warnings are errors); docs-screenshot: the front page and
+# an API page in headless Chromium (Debian: apt-get install chromium), PNGs in out/
+docs: $(DOCS)
+	NO_MKDOCS_2_WARNING=1 $(VENV)/bin/mkdocs build --strict
+	@echo "site: out/site/index.html"
+
+docs-screenshot: docs
+	$(PY) docs/screenshot.py
 
 clean:
 	rm -rf $(VENV) build install log *.egg-info

@@ -14,6 +14,7 @@ run unchanged on DA. Arithmetic with floats and numpy arrays follows numpy broad
 from __future__ import annotations
 
 import numbers
+from collections.abc import Sequence
 
 import numpy as np
 
@@ -242,7 +243,7 @@ class DA:
         return self * s
 
     # ------------------------------------------------------------------ elementary functions
-    def series(self, derivs) -> "DA":
+    def series(self, derivs: Sequence[np.ndarray | float]) -> DA:
         """Compose the univariate Taylor series ``sum_j derivs[j] * (self - cons)**j``.
 
         Args:

@@ -42,7 +42,7 @@ def monomial_values(dv: np.ndarray, T: MonomialTables) -> np.ndarray:
     return mv
 
 
-def evaluate(p: DA, dv) -> np.ndarray:
+def evaluate(p: DA, dv: np.ndarray) -> np.ndarray:
     """Evaluate the polynomial(s) at displacement(s) ``dv`` from their expansion point.
 
     Args:

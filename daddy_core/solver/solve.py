@@ -12,6 +12,7 @@ Each step lives in its own module; this one only chains them.
 from __future__ import annotations
 
 from dataclasses import replace
+from typing import Callable
 
 import numpy as np
 
@@ -23,6 +24,7 @@ from ..problem import Problem
 from . import end_game, path_exchange
 from .assemble import repropagation_miss, solution, unsolved
 from .context import Clock, SolveContext
+from .deadline import CancelFlag
 from .exact_start import exact_opening, exact_start_wanted
 from .homotopy import homotopy_steps
 from .options import Method, SolverOptions
@@ -30,10 +32,11 @@ from .solution import Solution, WarmStart
 from .start import start
 
 
-def solve(problem: Problem, u_guess=None, method: Method | str = Method.DYN,
-          fuel_optimal: bool | None = None, polish: bool = True,
-          options: SolverOptions | None = None, case_name: str | None = None,
-          progress=None, cancel=None) -> Solution:
+def solve(problem: Problem, u_guess: np.ndarray | Solution | WarmStart | None = None,
+          method: Method | str = Method.DYN, fuel_optimal: bool | None = None,
+          polish: bool = True, options: SolverOptions | None = None,
+          case_name: str | None = None, progress: Callable[[str], None] | None = None,
+          cancel: CancelFlag | None = None) -> Solution:
     """Solve ``problem`` with DADDy.
 
     Args:
