@@ -4,6 +4,8 @@ added as generated files, and the pages' code-formatted paths become links.
 - ``index.md`` is the README (the first screen), ``changelog.md`` the CHANGELOG, and
   ``ros-interface/`` the message-level contract in ``msg_docs/`` (its README as the index): one
   source each, the repository's.
+- ``run-times.md`` is generated from the catalogue's run times, measured by
+  ``bench/bench_catalogue.py --write`` (``daddy_core/catalogue/run_times.json``).
 - In every page, outside fenced code, `docs/NAME.md` and `msg_docs/NAME.md` written in
   backticks (how the pages cite each other, readable on GitHub and in a terminal) become
   links to the site's page, which ``mkdocs build --strict`` then checks.
@@ -38,7 +40,35 @@ def site_page(repo_path: str) -> str | None:
 def on_files(files, config):
     for src, dest in GENERATED.items():
         files.append(File.generated(config, dest, content=(ROOT / src).read_text()))
+    files.append(File.generated(config, "run-times.md", content=run_times_page()))
     return files
+
+
+def run_times_page() -> str:
+    """The catalogue's measured solve times as a page (``catalogue.run_times``)."""
+    from daddy_core.catalogue import list_cases, load_case
+    from daddy_core.catalogue.run_times import measured_on, read_run_times
+    rt = read_run_times()
+    rows = ["| case | stages | energy-optimal | fuel-optimal | final mass (fuel) |",
+            "|---|---|---|---|---|"]
+    for name in list_cases():
+        m = rt.get("cases", {}).get(name, {})
+
+        def cell(kind):
+            r = m.get(kind)
+            if r is None:
+                return "—"
+            return f"{r['cpu_s']:g} s" + ("" if r["converged"] else f" ({r['reason']})")
+        fuel = m.get("fuel") or {}
+        mass = fuel.get("final_mass_kg")
+        rows.append(f"| `{name}` | {load_case(name).stages} | {cell('energy')} | "
+                    f"{cell('fuel')} | {'—' if mass is None else f'{mass:.3f} kg'} |")
+    return ("# Catalogue run times\n\nCPU per solve of every catalogue case from its cold "
+            "guess, as `daddy list` shows them: generated from "
+            "`daddy_core/catalogue/run_times.json`, which `bench/bench_catalogue.py --write` "
+            f"measures ({measured_on(rt) or 'not measured'}; cap {rt.get('cap_s', '—')} s). "
+            "Measurements, not a model: they age with the code and the machine. The solver's "
+            "other figures are in `docs/benchmarks.md`.\n\n" + "\n".join(rows) + "\n")
 
 
 def on_page_markdown(markdown: str, page, config, files):

@@ -59,10 +59,11 @@ def test_the_site_builds_strict_with_every_page(site):
                  "algorithm-map/index.html", "design-notes/index.html", "cli/index.html",
                  "ros-interface/index.html", "ros-interface/replan_action/index.html",
                  "campaigns/index.html", "reliability/index.html", "benchmarks/index.html",
-                 "changelog/index.html", "api/solver/index.html"):
+                 "changelog/index.html", "run-times/index.html", "api/solver/index.html"):
         assert (site / page).exists(), page
     front = (site / "index.html").read_text()
     assert "Two commands" in front and 'href="benchmarks/"' in front   # the README, linked
+    assert "earth_mars" in (site / "run-times" / "index.html").read_text()   # from bench/
     api = (site / "api" / "solver" / "index.html").read_text()
     assert "u_guess" in api and "SolverOptions" in api and "fuel_step" in api
 
