@@ -500,7 +500,55 @@ def test_an_infeasible_problem_fails_fast_and_names_the_constraints_it_cannot_me
     assert 0 < sol.iterations["restore"] <= SolverOptions().newton.stall_iter + 1
     assert sol.violations[0]["name"] == "g_teq[0]" and sol.violations[0]["stage"] is None
     again = Solution.from_json(sol.to_json())
-    assert again.violations == sol.violations
+    assert again.violations == sol.violations and again.infeasible
+    # certified (solver.infeasibility): the least-violation point is returned, within the bound
+    assert sol.infeasible and sol.reason.startswith("infeasible: the least-violation point")
+    assert np.max(np.abs(sol.U)) <= 1.0 + 1e-9
+    assert {r["name"]: r["violation"] for r in sol.violations}["g_ineq[0]"] <= 1e-9
+    # ... and it is the least miss: the terminal residual is linear in U here, so the least
+    # 1/2 |psi|^2 with |u| <= 1 is a bounded linear least-squares problem (scipy's lsq_linear)
+    from scipy.optimize import lsq_linear
+    psi = lambda U: short.rollout(U.reshape(20, 1))[-1] - short.x_target   # noqa: E731
+    b = psi(np.zeros(20))
+    A = np.column_stack([psi(np.eye(20)[i]) - b for i in range(20)])
+    ref = lsq_linear(A, -b, bounds=(-1.0, 1.0), tol=1e-12)
+    assert 0.5 * np.sum(psi(sol.U.ravel()) ** 2) == pytest.approx(0.5 * np.sum((A @ ref.x + b) ** 2),
+                                                               rel=1e-6)
+
+
+def test_a_transfer_too_short_for_its_thruster_is_certified_infeasible():
+    """Earth-Mars in 100 days instead of 349 at 0.5 N (not a case anything was tuned on): the
+    solve says infeasible, and the answer it returns never exceeds the thrust bound (the
+    unconverged iterate before the certification asked for 25x it)."""
+    import json
+
+    from daddy_core.catalogue.cases import CASES_DIR, case_from_dict
+    d = json.loads((CASES_DIR / "earth_mars.json").read_text())
+    case = case_from_dict({**d, "tof_days": 100.0})
+    prob = problem_from_case(case)
+    sol = solve(prob, case.cold_guess(prob.N), fuel_optimal=False,
+                options=case_options(case, False))
+    assert not sol.converged and sol.infeasible and sol.reason.startswith("infeasible:")
+    assert np.max(np.linalg.norm(sol.thrust_n, axis=1)) <= 0.5 * (1 + 1e-9)
+    assert np.all(np.isfinite(sol.X)) and sol.max_violation > 1.0
+
+
+def test_a_feasible_problem_the_solver_failed_is_called_feasible():
+    """The double integrator with its augmented Lagrangian cut to one iteration of three DDP
+    steps, no restoration of the start and no polishing ends unconverged on its terminal rows; the least-violation solve meets them, so
+    the problem is not called infeasible: its point (feasible, not optimal) is returned and the
+    reason says the failure was the solver's."""
+    case = load_case("double_integrator")
+    prob = problem_from_case(case)
+    opts = case_options(case, False).with_(aul=dict(max_iter=1), ddp=dict(max_iter=3),
+                                           start=dict(restore=False))
+    sol = solve(prob, np.zeros((prob.N, 3)), options=opts, polish=False)
+    assert not sol.converged and not sol.infeasible
+    assert "the problem is feasible" in sol.reason
+    assert sol.max_violation <= opts.aul.tol
+    off = solve(prob, np.zeros((prob.N, 3)), polish=False,
+                options=opts.with_(end_game=dict(certify_infeasibility=False)))
+    assert not off.converged and off.max_violation > opts.aul.tol and "feasible" not in off.reason
 
 
 def test_a_converged_solution_reports_every_constraint_met():

@@ -228,6 +228,7 @@ class EndGameOptions(_Group):
     exact_start_iter: int = 6         # Newton iterations of its restoration (more: no fit)
     resolves: int = 1                 # re-solves of the last step after a stalled KKT polishing
     path_exchange_rounds: int = 4     # exchange rounds of g_path between the nodes (0: none)
+    certify_infeasibility: bool = True   # an unmet end gets a least-violation solve (infeasibility)
 
     def __post_init__(self):
         _check(self, "end_game")

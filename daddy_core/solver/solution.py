@@ -93,6 +93,9 @@ class Solution:
     parameters: dict | None = None   # static parameters {name: value} (``static_parameters``)
     phases: list | None = None   # a multi-phase problem's phases (``phases.phase_report``)
     exact_fuel: bool = False
+    # the solve certified the problem infeasible (``infeasibility``): no trajectory meets its
+    # terminal conditions with its stage constraints held; X, U: the least-violation point
+    infeasible: bool = False
     # feedback laws (``options.policy.order``; ``daddy_core.policy``), or why they were not built
     policy: Policy | None = field(default=None, repr=False, compare=False)
     policy_error: str | None = None

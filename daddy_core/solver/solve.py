@@ -11,6 +11,7 @@ Each step lives in its own module; this one only chains them.
 """
 from __future__ import annotations
 
+import time
 from dataclasses import replace
 from typing import Callable
 
@@ -21,7 +22,7 @@ from ..path_constraints import violated_at_start
 from ..phases import phase_report
 from ..policy import feedback_policy, fuel_policy
 from ..problem import Problem
-from . import end_game, path_exchange
+from . import end_game, infeasibility, path_exchange
 from .assemble import repropagation_miss, solution, unsolved
 from .context import Clock, SolveContext
 from .deadline import CancelFlag
@@ -130,11 +131,20 @@ def _solve(problem: Problem, u_guess, method, fuel_optimal, polish, options, cas
             game = end_game.opening(ctx, start(ctx, U0, warm), warm.duals)
         return solution(ctx, end_game.play(ctx, game), case_name)
 
+    clock = Clock(opts.run.time_budget_s, cancel=cancel)
     sol = once(problem, u_guess, fuel_optimal, opts)
-    if problem.g_path is None:
+    if problem.g_path is not None:
+        sol = path_exchange.hold(problem, sol, lambda p, warm, o: once(p, warm, None, o), opts,
+                                 progress)
+    if not infeasibility.wanted(sol, opts, clock.out_of_time()):
         return sol
-    return path_exchange.hold(problem, sol, lambda p, warm, o: once(p, warm, None, o), opts,
-                              progress)
+    if progress is not None:
+        progress(f"  unmet constraints ({sol.max_violation:.2e}): a least-violation solve "
+                 "asks whether any trajectory meets them")
+    remaining = (None if opts.run.time_budget_s is None
+                 else opts.run.time_budget_s - (time.perf_counter() - clock.start))
+    return infeasibility.certify(problem, sol, opts, lambda p, U0, o: _solve(
+        p, U0, method, False, polish, o, case_name, progress, cancel), remaining)
 
 
 __all__ = ["repropagation_miss", "solve"]
