@@ -5,6 +5,7 @@ import pathlib
 import numpy as np
 import pytest
 
+from daddy_core.da import functions as dm
 from daddy_core.errors import DaddyError
 from daddy_core.problem import Problem
 from daddy_core.catalogue import load_case, problem_from_case
@@ -531,6 +532,48 @@ def test_a_transfer_too_short_for_its_thruster_is_certified_infeasible():
     assert not sol.converged and sol.infeasible and sol.reason.startswith("infeasible:")
     assert np.max(np.linalg.norm(sol.thrust_n, axis=1)) <= 0.5 * (1 + 1e-9)
     assert np.all(np.isfinite(sol.X)) and sol.max_violation > 1.0
+
+
+def _double_integrator_3d(**changes):
+    """From rest at 0 to rest at x = 1 in 2 s (20 RK4 stages), |u| <= 10, energy cost: a
+    problem nothing here was tuned on, and the three ways of making it infeasible below."""
+    from daddy_core.dynamics import Dynamics
+    from daddy_core.problem import flow_step
+
+    def rhs(t, x, u):
+        return dm.stack([x[3], x[4], x[5], u[0], u[1], u[2]])
+    d = dict(name="di3", nu=3, x0=np.zeros(6), x_target=np.array([1.0, 0, 0, 0, 0, 0]),
+             stage_dt=np.full(20, 0.1), step=flow_step(Dynamics(rhs), "rk4", rk4_steps=1),
+             rhs=Dynamics(rhs), stage_cost=lambda x, u, dt, hom: dm.dot(u, u) * dt,
+             terminal_cost=lambda x, xt: x[0] * 0.0,
+             g_ineq=lambda x, u, dt: dm.stack([dm.dot(u, u) - 100.0]),
+             g_teq=lambda x, xt: x - xt, u_max=10.0)
+    return Problem(**{**d, **changes})
+
+
+@pytest.mark.parametrize("kind, changes, least_miss", [
+    ("thrust too weak for the time", dict(
+        g_ineq=lambda x, u, dt: dm.stack([dm.dot(u, u) - 0.25]), u_max=0.5), None),
+    ("a keep-out containing the target", dict(
+        g_path=lambda x, u: dm.stack([0.09 - ((x[0] - 1) ** 2 + x[1] ** 2 + x[2] ** 2)])), 0.3),
+    ("contradictory terminal rows", dict(
+        g_teq=lambda x, xt: dm.concatenate([x - xt, dm.stack([x[0] - 2.0])])), 0.5)])
+def test_three_kinds_of_infeasible_problem_are_called_infeasible_within_the_bounds(
+        kind, changes, least_miss):
+    """Each is certified infeasible, its answer within the thrust bound and its other stage
+    constraints; where the least miss is known in closed form (the keep-out's radius; half the
+    distance between x = 1 and x = 2) the answer misses by it."""
+    feasible = solve(_double_integrator_3d(), np.zeros((20, 3)))
+    assert feasible.converged and not feasible.infeasible
+    prob = _double_integrator_3d(**changes)
+    sol = solve(prob, np.zeros((20, 3)))
+    assert not sol.converged and sol.infeasible and sol.reason.startswith("infeasible:"), kind
+    assert np.max(np.linalg.norm(sol.U, axis=1)) <= prob.u_max * (1 + 1e-9)
+    stage_rows = [r for r in sol.violations if r["name"].startswith(("g_ineq", "g_path"))]
+    assert stage_rows and max(r["violation"] for r in stage_rows) <= 1e-8
+    if least_miss is not None:   # (the keep-out held between the nodes too: its exchange
+        # tightens the sampled rows, so the end may sit a few micrometres outside the sphere)
+        assert sol.max_violation == pytest.approx(least_miss, rel=1e-4)
 
 
 def test_a_feasible_problem_the_solver_failed_is_called_feasible():
