@@ -372,7 +372,8 @@ class SolverOptions:
         why each setting): the last homotopy step only, one DDP iteration may stop it, the
         penalty started high and rho carried, no stall rules, no KKT residual, the polishing
         from DDP's maps with a wider active set, no per-stage trust region; a fuel-optimal
-        plan restored in the exact fuel form first (``end_game.exact_start``)."""
+        plan restored in the exact fuel form first (``end_game.exact_start``); no
+        least-violation solve after an unmet end (``end_game.certify_infeasibility``)."""
         return cold.with_(
             homotopy=cold.homotopy[-1:],
             ddp=dict(min_iter=1, short_step=0.5, carry_rho=True, stage_trust=False),
@@ -380,7 +381,7 @@ class SolverOptions:
             newton=dict(stall_iter=0, polish_from_ddp_maps=True,
                         active_tol=max(active_tol, cold.newton.active_tol)),
             kkt=dict(tol=math.inf), start=dict(restore=bool(restore_first)),
-            end_game=dict(exact_start=True))
+            end_game=dict(exact_start=True, certify_infeasibility=False))
 
 
 # a warm re-plan's starting penalty: three growth steps below the cap, where a plan's
