@@ -2,8 +2,8 @@
 
 The site builds with warnings as errors (every nav entry, link and anchor resolved by MkDocs,
 every API page rendered from the docstrings) and no link of the built HTML points to a file
-that is not there. The Python blocks of README.md and docs/ run in ``test_readme.py``; here the
-other blocks: every shell command of ours parses with its own argument parser (``make``
+that is not there. The Python blocks of README.md and docs/ run in ``test_readme.py``, the one
+of msg_docs/ against a node in ``test_replan_action.py``; here the other blocks: every shell command of ours parses with its own argument parser (``make``
 targets exist, bench scripts answer ``--help``), JSON case files load, a campaign file in YAML
 validates, and the message examples in YAML parse."""
 import html.parser

@@ -182,3 +182,27 @@ def test_goals_the_node_cannot_serve_are_answered_with_their_code(graph):
     finally:
         node.trigger_activate()
     assert Time(sec=0) == Replan.Goal().header.stamp   # zero stamp: the newest estimate
+
+
+def test_the_msg_docs_example_runs_against_the_node(graph):
+    """msg_docs/replan_action.md's Python block, run as written (the node's namespace added to
+    the action's name): its goal is accepted, its feedback lines printed, its result a plan."""
+    import re
+    from pathlib import Path
+    node, client, (pos, vel, mass) = graph
+    page = Path(__file__).resolve().parents[1] / "msg_docs" / "replan_action.md"
+    block = re.search(r"```python\n(.*?)```", page.read_text(), re.S).group(1)
+    client.estimate(pos + [1e5, 0, 0], vel, mass, T0 + 40.0)
+    lines = []
+    scope = {"node": client.node, "estimate_stamp": cv.s_to_stamp(T0 + 40.0),
+             "print": lines.append}
+    exec(compile(block.replace('"/daddy_guidance/', f'"{NS}/daddy_guidance/'),
+                 str(page), "exec"), scope)
+    future, end = scope["future"], time.monotonic() + 30
+    while not future.done() and time.monotonic() < end:
+        time.sleep(0.01)
+    assert future.done() and future.result().accepted
+    status, r = client.result(future.result())
+    assert r.request_id == "gnc-42" and r.code in ("OK", "NOT_CONVERGED") and r.plan_stored
+    assert lines and all(isinstance(line, str) for line in lines)
+    scope["client"].destroy()
