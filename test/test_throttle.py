@@ -108,3 +108,41 @@ def test_a_warm_re_solve_from_the_exact_optimum_ends_there_again():
     again = solve(prob, sol, fuel_optimal=True, options=opts)
     assert again.converged, again.reason
     assert again.final_mass_kg == pytest.approx(sol.final_mass_kg, abs=1e-3)
+
+
+def test_a_users_own_dynamics_declared_as_thrust_get_the_exact_fuel_end_game():
+    """Earth-Mars with the two-body dynamics written here, as a user would (numpy and the DA
+    functions, the mass flow from ``thrust_norm``), the catalogue's costs and constraints:
+    declared with ``thrust_dynamics`` the fuel solve ends in the exact fuel form at the
+    independent transcription's optimum; the same function as a plain ``Dynamics`` has no
+    exact form and ends at the pseudo-Huber optimum, below it."""
+    from daddy_core.da import functions as dm
+    from daddy_core.dynamics import Dynamics, thrust_dynamics, thrust_norm
+    from daddy_core.problem import FlowStep
+
+    c = EARTH_MARS.spacecraft.exhaust_speed(EARTH_MARS.units)   # normalised
+
+    def rhs(t, x, u):                      # r'' = -r / |r|^3 + u / m,  m' = -|u| / c
+        r3 = (x[0] * x[0] + x[1] * x[1] + x[2] * x[2]) ** 1.5
+        return dm.stack([x[3], x[4], x[5], u[0] / x[6] - x[0] / r3, u[1] / x[6] - x[1] / r3,
+                         u[2] / x[6] - x[2] / r3, -thrust_norm(u) / c])
+
+    base = problem_from_case(EARTH_MARS)
+    oracle_kg = float((DATA / "earth_mars_fuel__cylindrical.csv").read_text()
+                      .splitlines()[-1].split(",")[8])                  # 603.5498
+
+    def users(dynamics):
+        s = base.step
+        step = FlowStep(dynamics, s.integrator, s.tol, s.rk4_steps, s.derivative_tol)
+        return base.__class__(**{**{f: getattr(base, f) for f in base.__dataclass_fields__},
+                                 "step": step, "rhs": dynamics})
+    opts = case_options(EARTH_MARS, True)
+    declared = users(thrust_dynamics(rhs))
+    assert has_throttle_form(declared)
+    sol = solve(declared, EARTH_MARS.cold_guess(base.N), fuel_optimal=True, options=opts)
+    assert sol.converged and sol.exact_fuel, sol.reason
+    assert sol.final_mass_kg == pytest.approx(oracle_kg, abs=2e-3)
+    plain = users(Dynamics(rhs))
+    assert not has_throttle_form(plain)
+    smooth = solve(plain, EARTH_MARS.cold_guess(base.N), fuel_optimal=True, options=opts)
+    assert not smooth.exact_fuel and smooth.final_mass_kg < sol.final_mass_kg

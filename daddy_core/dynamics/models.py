@@ -39,16 +39,29 @@ def with_thrust_magnitude(u):
     return dm.stack([u[0], u[1], u[2], thrust_magnitude(u)])
 
 
-def _magnitude(u):
-    """|u| of a control, prepared by ``with_thrust_magnitude`` or not."""
+def thrust_norm(u):
+    """|u| of a thrust control u = [u_0, u_1, u_2, ...]: the prepared magnitude u[3] of a
+    ``thrust_dynamics`` right-hand side (exact, also where the exact fuel form hands it
+    u_max s at s = 0), else the regularised ``thrust_magnitude``. A mass flow written with it
+    is what the exact fuel end game needs (``throttle``)."""
     return u[3] if len(u) > 3 else thrust_magnitude(u)
+
+
+def thrust_dynamics(rhs, **options) -> Dynamics:
+    """A user's right-hand side rhs(t, x, u) whose first three control components are a thrust
+    vector, declared as such: the integrators hand it u = [u_0, u_1, u_2, |u|]
+    (``with_thrust_magnitude``) and its mass flow reads ``thrust_norm(u)``. A problem built on
+    it with a thrust bound (``Problem.u_max``) and a fuel cost (``fuel.FuelStageCost``, e.g.
+    ``pseudo_huber_stage_cost``) has the exact fuel form: a fuel-optimal solve ends at the
+    bang-bang optimum, as the catalogue's models do (docs/library.md). ``options``: the other
+    ``Dynamics`` fields (``scalar_components``, ``max_step``)."""
+    return Dynamics(rhs, prepare_control=with_thrust_magnitude, **options)
 
 
 def _indexed(rhs, max_step: float | None = None) -> Dynamics:
     """A right-hand side below: it reads x and u by index only, and takes the prepared
     control of ``with_thrust_magnitude``."""
-    return Dynamics(rhs, scalar_components=True, prepare_control=with_thrust_magnitude,
-                    max_step=max_step)
+    return thrust_dynamics(rhs, scalar_components=True, max_step=max_step)
 
 
 # The Sundman-transformed model's step bound [rad of true longitude]: one RK78 step of 2 pi / 10
@@ -78,7 +91,7 @@ def two_body(gm: float, exhaust_speed: float):
         k = (x[0] * x[0] + x[1] * x[1] + x[2] * x[2]) ** -1.5 * gm   # gm / r^3
         inv_m = 1.0 / x[6]
         return dm.vector([x[3], x[4], x[5], u[0] * inv_m - x[0] * k, u[1] * inv_m - x[1] * k,
-                         u[2] * inv_m - x[2] * k, _magnitude(u) * inv_c])
+                         u[2] * inv_m - x[2] * k, thrust_norm(u) * inv_c])
     return _indexed(rhs)
 
 
@@ -104,7 +117,7 @@ def cr3bp(mu: float, exhaust_speed: float):
         ax = x[4] * 2.0 + px - d1 * k1 - d2 * k2 + u[0] * inv_m
         ay = x[3] * -2.0 + py - py * ksum + u[1] * inv_m
         az = u[2] * inv_m - pz * ksum
-        return dm.vector([x[3], x[4], x[5], ax, ay, az, _magnitude(u) * inv_c])
+        return dm.vector([x[3], x[4], x[5], ax, ay, az, thrust_norm(u) * inv_c])
     return _indexed(rhs)
 
 
@@ -135,7 +148,7 @@ def equinoctial(gm: float, exhaust_speed: float):
         dr = B * sam * g * sL * inv_psi * fn * 0.5
         ds = B * sam * g * cL * inv_psi * fn * 0.5
         dL = psi * psi / (B * B * B * a * sam) - B * sam * inv_psi * rc * fn
-        return dm.vector([da_, dp, dq, dr, ds, dL, _magnitude(u) * (-1.0 / exhaust_speed)])
+        return dm.vector([da_, dp, dq, dr, ds, dL, thrust_norm(u) * (-1.0 / exhaust_speed)])
     return _indexed(rhs)
 
 
@@ -183,7 +196,7 @@ def equinoctial_sundman(gm: float, exhaust_speed: float, j2: float = 0.0, j2_rad
             at = at + c_hk * (h * cL + k * sL) * 8.0
             an = an + c_hk * (1.0 - h * h - k * k) * 4.0
         rates, tau = _gauss_sundman(x, sL, cL, ar, at, an, inv_sqrt_gm)
-        return dm.vector([*rates, _magnitude(u) * inv_c * tau])
+        return dm.vector([*rates, thrust_norm(u) * inv_c * tau])
     return _indexed(rhs, SUNDMAN_MAX_STEP)
 
 
@@ -271,7 +284,7 @@ def earth_cartesian(gm: float, exhaust_speed: float, j2: float = 0.0, j2_radius:
             a0 = a0 + c * x0 * (1.0 - 5.0 * z2)
             a1 = a1 + c * x1 * (1.0 - 5.0 * z2)
             a2 = a2 + c * x2 * (3.0 - 5.0 * z2)
-        return dm.vector([v0, v1, v2, a0, a1, a2, _magnitude(u) * inv_c])
+        return dm.vector([v0, v1, v2, a0, a1, a2, thrust_norm(u) * inv_c])
     return _indexed(rhs)
 
 
