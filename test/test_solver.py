@@ -571,6 +571,8 @@ def test_three_kinds_of_infeasible_problem_are_called_infeasible_within_the_boun
     assert np.max(np.linalg.norm(sol.U, axis=1)) <= prob.u_max * (1 + 1e-9)
     stage_rows = [r for r in sol.violations if r["name"].startswith(("g_ineq", "g_path"))]
     assert stage_rows and max(r["violation"] for r in stage_rows) <= 1e-8
+    if prob.g_path is not None:   # held between the nodes too (dense re-propagation)
+        assert sol.min_path_margin is not None and sol.min_path_margin >= -1e-9
     if least_miss is not None:   # (the keep-out held between the nodes too: its exchange
         # tightens the sampled rows, so the end may sit a few micrometres outside the sphere)
         assert sol.max_violation == pytest.approx(least_miss, rel=1e-4)

@@ -98,6 +98,7 @@ def certify(problem: Problem, sol: Solution, opts: SolverOptions, solve_again,
                    + time.perf_counter() - t0)
     return replace(point, reason=reason, iterations=sol.iterations, runtime_s=runtime,
                    history=sol.history, fuel_optimal=sol.fuel_optimal,
+                   min_path_margin=best.min_path_margin,
                    infeasible=verdict is Verdict.INFEASIBLE)
 
 
