@@ -8,8 +8,11 @@ moved into the cost and everything else held (the thrust bound among them). Its 
 decides the verdict (``Verdict``):
 
 - INFEASIBLE: it holds the stage constraints and still misses psi by more than
-  ``INFEASIBLE_MARGIN`` x tol_aul. The solve returns that point -- the least miss the bounds
-  allow, never breaking them -- with the reason "infeasible: ...";
+  ``INFEASIBLE_MARGIN`` x tol_aul. The solve returns that point -- the least miss found, never
+  breaking the bounds -- with the reason "infeasible: ...". The least-violation solve is local:
+  where that problem is convex (linear dynamics, convex constraints) its minimum is the global
+  one and the verdict a certificate; where it is not (a keep-out zone, nonlinear dynamics) it
+  says that no point near this solve's end meets the constraints, and the reason says so;
 - FEASIBLE: it meets every constraint: the problem is feasible and the failure is the
   solver's; the solve returns it (feasible, not optimal: ``converged=False``) and says so;
 - UNDECIDED: the least-violation solve itself did not settle; the solve's own answer stands.
@@ -89,8 +92,9 @@ def certify(problem: Problem, sol: Solution, opts: SolverOptions, solve_again,
         worst = point.violations[0]
         reason = (f"infeasible: the least-violation point, every stage constraint held, still "
                   f"misses the terminal conditions by {miss:.3e} (largest: {worst['name']}"
-                  + (f", {worst['label']}" if worst["label"] else "") + f"); the solve had "
-                  f"ended: {sol.reason}")
+                  + (f", {worst['label']}" if worst["label"] else "") + "; the least miss found "
+                  "from this solve's end: a local minimum where the problem is not convex); the "
+                  f"solve had ended: {sol.reason}")
     else:
         reason = (f"{sol.reason}; the problem is feasible: the least-violation solve met every "
                   "constraint, and its point (not optimal) is returned")

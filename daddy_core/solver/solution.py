@@ -93,8 +93,9 @@ class Solution:
     parameters: dict | None = None   # static parameters {name: value} (``static_parameters``)
     phases: list | None = None   # a multi-phase problem's phases (``phases.phase_report``)
     exact_fuel: bool = False
-    # the solve certified the problem infeasible (``infeasibility``): no trajectory meets its
-    # terminal conditions with its stage constraints held; X, U: the least-violation point
+    # the solve found the problem infeasible (``infeasibility``): the least-violation solve from
+    # its end misses the terminal conditions with the stage constraints held (a certificate
+    # where that problem is convex, a local verdict where not); X, U: that point
     infeasible: bool = False
     # feedback laws (``options.policy.order``; ``daddy_core.policy``), or why they were not built
     policy: Policy | None = field(default=None, repr=False, compare=False)
