@@ -21,7 +21,8 @@ from __future__ import annotations
 
 import numpy as np
 
-from .dynamics.units import (AU_KM, EARTH_RADIUS_KM, MOON_RADIUS_KM, Units)
+from .dynamics.models import rtn_basis
+from .dynamics.units import AU_KM, EARTH_RADIUS_KM, MOON_RADIUS_KM, Units
 from .errors import DaddyError
 from .plotting import _pyplot
 from .trajectory_output import is_earth_centred, node_times_s
@@ -49,13 +50,8 @@ def thrust_in_frame(sol) -> np.ndarray:
     u = sol.thrust_n[:, :3]
     if not is_earth_centred(sol):
         return u
-    rv = sol.X_si[:-1, :6]
-    r, v = rv[:, :3], rv[:, 3:]
-    R = r / np.linalg.norm(r, axis=1, keepdims=True)
-    h = np.cross(r, v)
-    N = h / np.linalg.norm(h, axis=1, keepdims=True)
-    T = np.cross(N, R)
-    return u[:, :1] * R + u[:, 1:2] * T + u[:, 2:3] * N
+    X = sol.X_si
+    return np.array([rtn_basis(X[k, :3], X[k, 3:6]) @ u[k] for k in range(sol.N)])
 
 
 def kepler_orbit(state_km: np.ndarray, gm_km3_s2: float, n: int = 361) -> np.ndarray:
@@ -177,8 +173,9 @@ def plot_mission(sol, path, case=None, u_max_n: float | None = None) -> None:
     a1 = fig.add_subplot(right[0])
     x = days
     label = f"thrust arcs (> {THRUST_ON:g} u_max): {switches(on)} switches"
+    # (Earth-centred stages are angles: the revolutions made at each node)
+    revs = np.concatenate([[0.0], np.cumsum(sol.stage_dt)]) / (2 * np.pi) if earth else None
     if earth and sol.N > DENSE_STAGES:
-        revs = np.concatenate([[0.0], np.cumsum(sol.stage_dt)]) / (2 * np.pi)
         rev = np.floor(revs[:-1]).astype(int)
         dt = np.diff(days)
         duty = np.bincount(rev, dt * on) / np.bincount(rev, dt)
@@ -228,7 +225,6 @@ def plot_mission(sol, path, case=None, u_max_n: float | None = None) -> None:
         a4.ticklabel_format(axis="y", useOffset=False)
         a4.set_ylabel("[deg]")
         a4.legend(fontsize=8)
-        revs = np.concatenate([[0.0], np.cumsum(sol.stage_dt)]) / (2 * np.pi)
         top = a1.secondary_xaxis("top", functions=(
             lambda d: np.interp(d, days, revs), lambda r: np.interp(r, revs, days)))
         top.set_xlabel("revolutions")

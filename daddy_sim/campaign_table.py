@@ -27,7 +27,9 @@ from pathlib import Path
 
 import numpy as np
 
-from .campaign_results import Header, Results, read_results
+from daddy_core.dynamics.models import rtn_basis
+
+from .campaign_results import Header, Results, Spread, read_results
 from .campaigns import CampaignError, Dispersion, RunRecord, RunStatus
 
 METADATA_KEY = b"daddy.campaign.header"
@@ -96,24 +98,11 @@ def target_state_si(case: str) -> tuple | None:
     return tuple(float(v) for v in c.units.cartesian_si(c.x_target)[:6])
 
 
-def rtn_basis(target_si) -> np.ndarray:
-    """(3, 3) rows R, T, N of the target's local frame (module docstring)."""
-    r, v = np.asarray(target_si[:3], float), np.asarray(target_si[3:6], float)
-    R = r / np.linalg.norm(r)
-    h = np.cross(r, v)
-    N = h / np.linalg.norm(h)
-    return np.array([R, np.cross(N, R), N])
-
-
-def _p95(xs) -> float:
-    xs = sorted(xs)
-    return xs[max(0, math.ceil(0.95 * len(xs)) - 1)] if xs else NAN
-
-
 def columns(results: Results) -> dict[str, list]:
     """The table as columns (``NAMES`` order), one entry per run in file order."""
     target = target_state_si(results.header.config.case)
-    basis = rtn_basis(target) if target is not None else None
+    # (rows R, T, N: the transpose of rtn_basis's columns)
+    basis = rtn_basis(target[:3], target[3:6]).T if target is not None else None
     ref = results.header.propellant_open_loop_kg
     cols: dict[str, list] = {n: [] for n in NAMES}
     for r in results.records:
@@ -129,7 +118,7 @@ def columns(results: Results) -> dict[str, list]:
             "miss_km": r.miss_km, "miss_cm_s": r.miss_cm_s, "final_mass_kg": r.final_mass_kg,
             "propellant_kg": r.propellant_kg, "propellant_excess_kg": r.propellant_kg - ref,
             "replans": r.replans, "drift_replans": r.drift_replans,
-            "latency_ms_median": r.latency_ms_median, "latency_ms_p95": _p95(r.latency_ms),
+            "latency_ms_median": r.latency_ms_median, "latency_ms_p95": Spread.of(r.latency_ms).p95,
             "latency_ms_max": r.latency_ms_max, "laws_served": r.laws_served,
             "law_eval_ms_median": (statistics.median(r.law_eval_ms) if r.law_eval_ms
                                    else NAN),

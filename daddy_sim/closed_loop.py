@@ -100,17 +100,16 @@ def fly(link, sim: TruthSim, planner: GuidancePlanner, policy: TriggerConfig, su
     N = planner.base_problem.N
     dt_stage = sim.tof_s / N
     latencies, levels, thrust_log = [], [], []
-    flown, flown_v = [sim.truth_si()[0]], [sim.truth_si()[1]]
-    times, nav = [sim.t_s], []
+    true_pos, true_vel, _ = sim.truth_si()
+    flown, flown_v, times, nav = [true_pos], [true_vel], [sim.t_s], []
     triggered = 0
     link.truth(*sim.truth_si(), sim.t_s)
     link.estimate(*sim.estimate_si(), sim.t_s, "start")   # starts the policy's prediction
     for j, (t0, t1) in enumerate(flight_steps(
             sim.t_s, N, dt_stage, substeps, policy.arrival_stages,
             final_substeps or substeps, policy.arrival_min_step)):
-        pos, vel, mass = sim.estimate_si()
-        true_pos, true_vel, _ = sim.truth_si()
-        nav.append((np.linalg.norm(pos - true_pos), np.linalg.norm(vel - true_vel)))
+        pos, vel, mass = sim.estimate_si()   # (of the truth at t0: the last flown state)
+        nav.append((np.linalg.norm(pos - flown[-1]), np.linalg.norm(vel - flown_v[-1])))
         out = link.estimate(pos, vel, mass, t0, f"r{j}")
         if out is not None:
             reason, level, lat = out
@@ -128,8 +127,9 @@ def fly(link, sim: TruthSim, planner: GuidancePlanner, policy: TriggerConfig, su
             applied = sim.apply(thrust, b - a)
             thrust_log.append((a, float(np.linalg.norm(applied))))
             link.truth(*sim.truth_si(), sim.t_s)
-        flown.append(sim.truth_si()[0])
-        flown_v.append(sim.truth_si()[1])
+        true_pos, true_vel, _ = sim.truth_si()
+        flown.append(true_pos)
+        flown_v.append(true_vel)
         times.append(sim.t_s)
     miss_r, miss_v = sim.miss()
     m_final = sim.truth_si()[2]

@@ -47,22 +47,16 @@ def on_files(files, config):
 def run_times_page() -> str:
     """The catalogue's measured solve times as a page (``catalogue.run_times``)."""
     from daddy_core.catalogue import list_cases, load_case
-    from daddy_core.catalogue.run_times import measured_on, read_run_times
+    from daddy_core.catalogue.run_times import measured_on, read_run_times, solve_time
     rt = read_run_times()
     rows = ["| case | stages | energy-optimal | fuel-optimal | final mass (fuel) |",
             "|---|---|---|---|---|"]
     for name in list_cases():
         m = rt.get("cases", {}).get(name, {})
-
-        def cell(kind):
-            r = m.get(kind)
-            if r is None:
-                return "—"
-            return f"{r['cpu_s']:g} s" + ("" if r["converged"] else f" ({r['reason']})")
-        fuel = m.get("fuel") or {}
-        mass = fuel.get("final_mass_kg")
-        rows.append(f"| `{name}` | {load_case(name).stages} | {cell('energy')} | "
-                    f"{cell('fuel')} | {'—' if mass is None else f'{mass:.3f} kg'} |")
+        energy, fuel = (solve_time(m[k]) if k in m else "—" for k in ("energy", "fuel"))
+        mass = (m.get("fuel") or {}).get("final_mass_kg")
+        rows.append(f"| `{name}` | {load_case(name).stages} | {energy} | {fuel} | "
+                    f"{'—' if mass is None else f'{mass:.3f} kg'} |")
     return ("# Catalogue run times\n\nCPU per solve of every catalogue case from its cold "
             "guess, as `daddy list` shows them: generated from "
             "`daddy_core/catalogue/run_times.json`, which `bench/bench_catalogue.py --write` "

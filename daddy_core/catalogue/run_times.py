@@ -23,16 +23,15 @@ def expected_run_time(run_times: dict, case_name: str) -> str:
     """'energy 45 s, fuel 7.1 s' for a case measured in ``run_times`` ('fuel: not converged in
     600 s' where a solve did not converge within the cap); '' when it was not measured."""
     measured = run_times.get("cases", {}).get(case_name, {})
-    parts = []
-    for kind in ("energy", "fuel"):
-        r = measured.get(kind)
-        if r is None:
-            continue
-        if r.get("converged"):
-            parts.append(f"{kind} {r['cpu_s']:.3g} s")
-        else:
-            parts.append(f"{kind}: not converged in {r['cpu_s']:.0f} s")
-    return ", ".join(parts)
+    return ", ".join(f"{kind}{' ' if r.get('converged') else ': '}{solve_time(r)}"
+                     for kind in ("energy", "fuel") if (r := measured.get(kind)) is not None)
+
+
+def solve_time(measured: dict) -> str:
+    """One measured solve ({"cpu_s", "converged", ...}): '45 s', or 'not converged in 600 s'."""
+    if measured.get("converged"):
+        return f"{measured['cpu_s']:.3g} s"
+    return f"not converged in {measured['cpu_s']:.0f} s"
 
 
 def measured_on(run_times: dict) -> str:
