@@ -80,7 +80,7 @@ def ddp(st: Stages, method: Method, opts: SolverOptions, stats: DDPStats,
     (``stopping.crawling``).
     """
     ctl = StepControl(opts, method.dyn, opts.ddp.rho_init if rho0 is None else rho0, radius=radius0)
-    stop = Stopping(opts, retry, [(st.cost, 1.0)])
+    stop = Stopping(opts, retry, [(st.cost, 1.0, st.scale)])
     cur = _Nominal(st)
     status, iterations = Status.DDP_MAX_ITER, opts.ddp.max_iter
     for it in range(1, opts.ddp.max_iter + 1):
@@ -106,7 +106,7 @@ def _iteration(cur: _Nominal, method: Method, ctl: StepControl, stop: Stopping,
         return ctl.indefinite()
     cur.gains = gains
     J = st.cost
-    full_step_gain = -(gains.dv1 + gains.dv2) / max(abs(J), 1e-300)
+    full_step_gain = -(gains.dv1 + gains.dv2) / st.scale
     t0 = time.perf_counter()
     # a trial step may overflow in the user's dynamics or cost: a non-finite trial is rejected
     # (``forward_pass``), so numpy's warnings would only be noise on the user's terminal
@@ -116,14 +116,14 @@ def _iteration(cur: _Nominal, method: Method, ctl: StepControl, stop: Stopping,
     if isinstance(step, Blame):
         # those stages' steps are bounded now: sweep again on the same expansions (an
         # iteration of ddp_max_iter, as a trust region's rejected step is)
-        return stop.after_rejection(J)
+        return stop.after_rejection(st)
     if step is None:
         if stop.nothing_to_gain(it, gains, full_step_gain, ctl.trust_region):
             return Status.DDP_NOTHING_TO_GAIN
-        return ctl.rejected(st, gains) or stop.after_rejection(J)
+        return ctl.rejected(st, gains) or stop.after_rejection(st)
     cur.st = _accept(st, step, method, stats)
     ctl.accepted(step)
-    return stop.after_step(it, J, step.cost, cur.st.cost, step.alpha, gains, full_step_gain)
+    return stop.after_step(it, st, step.cost, cur.st, step.alpha, gains, full_step_gain)
 
 
 def _accept(st: Stages, step: Trial, method: Method, stats: DDPStats) -> Stages:

@@ -72,12 +72,13 @@ def blamed_stages(st: Stages, trial: Trial, stage_costs: np.ndarray, expected: f
 
     Not blamed (the failure is not local: one shorter step for every stage is the answer):
     more than ``_LOCAL_FRACTION`` of the stages, or a step whose ``worth`` (default: its whole
-    expected decrease) is below ``tol`` (tol_ddp) relative to the cost, whose gap is round-off
+    expected decrease) is below ``tol`` (tol_ddp) relative to the cost (``Stages.scale``), whose
+    gap is round-off
     (design notes: local blame only)."""
     p = st.problem
     gap = expected - actual
     worth = expected if worth is None else worth
-    if not (gap > 0 and math.isfinite(gap)) or worth < tol * abs(st.cost):
+    if not (gap > 0 and math.isfinite(gap)) or worth < tol * st.scale:
         return np.empty(0, dtype=int)
     dz = trial.dz.T                                              # (N, n)
     change = stage_costs - st.l
@@ -135,7 +136,7 @@ def trust_region_step(st: Stages, gains: Gains, dyn: bool, opts: SolverOptions,
     if _accepted(expected, actual, J, Jn, 1 - tol, 1 + tol):
         return trial
     # a step predicted to gain less than tol_ddp: the ratio is round-off, any decrease will do
-    small = expected < opts.ddp.tol * abs(J)
+    small = expected < opts.ddp.tol * st.scale
     if small and actual >= 0 and math.isfinite(Jn):
         return trial
     if opts.ddp.stage_trust and math.isfinite(Jn):

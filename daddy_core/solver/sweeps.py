@@ -18,6 +18,7 @@ import numpy as np
 from .. import da
 from ..errors import DaddyError
 from ..problem import Problem
+from .cost_scale import anchor as cost_anchor, scale as cost_scale
 from .lagrangian import Multipliers, augmented_stage_cost, augmented_terminal_cost
 from .linalg import regularised_inverse, trust_region_inverse
 from .options import Sweep
@@ -55,6 +56,7 @@ class Stages:
         l: (N,), lz: (N, n), lzz: (N, n, n): the augmented stage cost and its derivatives.
         phix: (nx,), phixx: (nx, nx): derivatives of the augmented terminal cost.
         cost: augmented cost J of the nominal.
+        anchor: the cost's constant-carrying reference (``cost_scale.anchor``).
     """
 
     def __init__(self, problem: Problem, X, U, mult: Multipliers, hom, eps_da: float, F=None,
@@ -70,6 +72,12 @@ class Stages:
         self.walked = np.zeros(self.U.shape[0]) if walked is None else walked
         self._map_rows = None
         self._expand_costs()
+        self.anchor = cost_anchor(problem, hom)
+
+    @property
+    def scale(self) -> float:
+        """What a relative test of this nominal's cost divides by (``cost_scale``)."""
+        return cost_scale(self.cost, self.anchor)
 
     @property
     def n(self) -> int:
