@@ -56,6 +56,12 @@ def _parser() -> argparse.ArgumentParser:
     s.add_argument("--free-revolutions", type=float, nargs=2, metavar=("LO", "HI"),
                    help="Earth-centred cases: the arrival angle free in [LO, HI] revolutions, "
                         "one solve (a case file's problem.revolutions_window)")
+    s.add_argument("--multistart", type=int, metavar="RANDOM", default=None,
+                   help="the global option: solve from the cold guess, zero thrust, the "
+                   "blended states and RANDOM random guesses in parallel; keep the best "
+                   "converged optimum and list the distinct ones")
+    s.add_argument("--jobs", type=int, default=2, help="--multistart's worker processes")
+    s.add_argument("--seed", type=int, default=0, help="--multistart's random guesses' seed")
     s.add_argument("--json", metavar="FILE", help="write the solution as JSON")
     s.add_argument("--npz", metavar="FILE", help="write the solution as NPZ")
     _output_arguments(s)
@@ -197,6 +203,9 @@ def main(argv=None) -> int:
         fuel = not args.energy and case.system != "double_integrator"
         if args.fuel:
             fuel = True
+        if args.multistart is not None and (args.search_revolutions or args.warm_start):
+            raise DaddyError("--multistart makes its own starts: it takes neither "
+                             "--search-revolutions nor --warm-start")
         if args.search_revolutions and args.free_revolutions:
             raise DaddyError("--search-revolutions and --free-revolutions: the search solves "
                              "fixed angles; the free angle is one solve: give one of them")
@@ -219,6 +228,10 @@ def main(argv=None) -> int:
                 return 1
             sol = found.best
             problem = problem_from_case(case.with_revolutions(found.revolutions))
+        elif args.multistart is not None:
+            sol = _multistart(problem, u0, fuel, opts, args, case.name)
+            if sol is None:
+                return 1
         else:
             sol = solve(problem, u0, method=args.method, fuel_optimal=fuel,
                         polish=not args.no_polish, options=opts, case_name=case.name,
@@ -251,6 +264,21 @@ def main(argv=None) -> int:
         print(f"daddy: not converged: {sol.reason}", file=sys.stderr)
         return 1
     return 0
+
+
+def _multistart(problem, u0, fuel: bool, opts, args, case_name: str):
+    """``daddy solve --multistart``: the best converged optimum (its summary printed), or
+    None (a line on stderr) when no start converged."""
+    from .solver.multistart import multistart, random_starts, structured_starts
+    if args.multistart < 0:
+        raise DaddyError(f"--multistart: the random starts must be >= 0, got {args.multistart}")
+    starts = structured_starts(problem, u0) + random_starts(problem, args.multistart, args.seed)
+    res = multistart(problem, starts, method=args.method, fuel_optimal=fuel,
+                     polish=not args.no_polish, options=opts, case_name=case_name, jobs=args.jobs)
+    print(res.summary())
+    if res.best is None:
+        print("daddy: not converged: no start of the multi-start converged", file=sys.stderr)
+    return res.best
 
 
 def _predict(args) -> int:

@@ -215,9 +215,11 @@ class WarmStart:
         maps: stage maps of a nearby trajectory with the problem's stages: the initial rollout
             evaluates them where a stage lies inside their radius (Alg. 8) and the Newton
             restoration re-centres them instead of expanding.
-        X: (N+1, nx) states of a nearby trajectory at the problem's stage ends (row 0 is
-            replaced by the problem's x0): where the exact warm start's Newton restoration
-            starts instead of a rollout (``exact_start``; its residuals are exact).
+        X: (N+1, nx) states at the problem's stage ends (row 0 is replaced by the problem's
+            x0): where Newton's restoration starts instead of a rollout of U -- the exact warm
+            start's (``exact_start``), and, without maps, the general start's (a state guess:
+            the blend of two orbits of ``multistart``, another solver's trajectory); its
+            residuals are exact, so the states need not be flyable.
     """
 
     U: np.ndarray | None = None

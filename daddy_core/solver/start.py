@@ -30,7 +30,9 @@ class Start:
 
 
 def start(ctx: SolveContext, U0: np.ndarray, warm: WarmStart) -> Start:
-    """The initial rollout of U0 (N, nu) and, with ``opts.start.restore``, its restoration."""
+    """The initial rollout of U0 (N, nu) and, with ``opts.start.restore``, its restoration --
+    from the warm start's states when it gives them without maps (a state guess: a blend of
+    the departure and arrival orbits, another solver's trajectory), else from the rollout."""
     problem, opts = ctx.problem, ctx.opts
     maps = warm.maps
     if maps is not None and maps.N != problem.N:
@@ -46,18 +48,35 @@ def start(ctx: SolveContext, U0: np.ndarray, warm: WarmStart) -> Start:
         return Start(X, U0)
     with ctx.clock.phase("restore"):
         return _restored(ctx, X, U0, maps, cold=maps is None and warm.duals is None,
-                         reach=reach)
+                         reach=reach, states=None if maps is not None else guess_states(
+                             problem, warm.X))
 
 
-def _restored(ctx: SolveContext, X, U0, maps, cold: bool, reach: float) -> Start:
-    """The start after Newton's restoration of (X, U0) and its fallbacks."""
+def guess_states(problem: Problem, X) -> np.ndarray | None:
+    """A state guess (N+1, nx) checked, with the problem's x0 in row 0; None for None."""
+    if X is None:
+        return None
+    X = np.array(X, dtype=float)
+    if X.shape != (problem.N + 1, problem.nx) or not np.all(np.isfinite(X)):
+        raise DaddyError(f"WarmStart.X must be ({problem.N + 1}, {problem.nx}) finite states at "
+                         f"the stage ends, got shape {X.shape}"
+                         f"{'' if X.shape != (problem.N + 1, problem.nx) else ' with non-finite values'}")
+    X[0] = problem.x0
+    return X
+
+
+def _restored(ctx: SolveContext, X, U0, maps, cold: bool, reach: float,
+              states: np.ndarray | None = None) -> Start:
+    """The start after Newton's restoration of (X, U0) -- or of (``states``, U0), whose
+    failure starts from (X, U0) -- and its fallbacks."""
     problem = ctx.problem
-    res = _restore(ctx, problem, X, U0, maps, cold)
+    first = X if states is None else states
+    res = _restore(ctx, problem, first, U0, maps, cold)
     relaxed = False
     if not res.converged and problem.g_path is not None:
         # the restoration without the path constraint: the AUL takes a start that meets the
         # rest from there (design notes: restore without g_path)
-        alt = _restore(ctx, replace(problem, g_path=None), X, U0, maps, cold)
+        alt = _restore(ctx, replace(problem, g_path=None), first, U0, maps, cold)
         if alt.converged:
             res, relaxed = alt, True
     st = Start(X, U0)
@@ -72,7 +91,7 @@ def _restored(ctx: SolveContext, X, U0, maps, cold: bool, reach: float) -> Start
                                             ctx.opts.newton.map_reach)
     elif maps is not None and reach > 1:
         st.X = maps.rollout(problem, U0)[0]   # DDP starts from a consistent trajectory
-    else:   # DDP starts from the guess, where Newton's first model expanded the stages
+    elif states is None:   # DDP starts from the guess, where Newton's first model expanded it
         st.F = res.start_F
     ctx.say(f"start {'restored' if res.converged else 'not restored'} by Newton"
             f"{' (without g_path)' if relaxed else ''}: {res.iterations} iterations, max "
