@@ -57,10 +57,13 @@ def guess_states(problem: Problem, X) -> np.ndarray | None:
     if X is None:
         return None
     X = np.array(X, dtype=float)
-    if X.shape != (problem.N + 1, problem.nx) or not np.all(np.isfinite(X)):
-        raise DaddyError(f"WarmStart.X must be ({problem.N + 1}, {problem.nx}) finite states at "
-                         f"the stage ends, got shape {X.shape}"
-                         f"{'' if X.shape != (problem.N + 1, problem.nx) else ' with non-finite values'}")
+    shape = (problem.N + 1, problem.nx)
+    if X.shape != shape:
+        raise DaddyError(f"WarmStart.X must be {shape} states at the stage ends, got shape "
+                         f"{X.shape}")
+    bad = np.flatnonzero(~np.all(np.isfinite(X), axis=1))
+    if bad.size:
+        raise DaddyError(f"WarmStart.X has non-finite states at stage ends {bad[:5].tolist()}")
     X[0] = problem.x0
     return X
 
