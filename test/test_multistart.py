@@ -145,3 +145,20 @@ def test_multistart_on_a_dask_cluster_gives_the_local_optima():
         assert "127.0.0.1" in what
         res = multistart(_double_well(), random=6, seed=1, executor=pool)
     assert [o.value for o in res.optima] == pytest.approx([deep, shallow], abs=1e-6)
+
+
+def test_a_solve_stalled_short_of_its_target_is_restarted_from_the_blend():
+    """``blend.restart_from_blend``: the Lyapunov L1 -> L2 transfer from zero thrust stalls
+    0.205 from its target with the penalty at its cap (a local minimum of the violation); the
+    solve then starts again from the blended states and returns the paper's optimum
+    (997.49 kg), saying so. The guidance node's warm preset never restarts."""
+    from daddy_core.catalogue import load_case, problem_from_case
+    from daddy_core.solver import case_options
+    case = load_case("lyapunov_l1_l2")
+    p = problem_from_case(case)
+    sol = solve(p, np.zeros((p.N, p.nu)), fuel_optimal=True, options=case_options(case, True))
+    assert sol.converged and sol.max_violation <= 1e-10, sol.reason
+    assert sol.final_mass_kg == pytest.approx(997.487, abs=0.01)
+    assert "restarted from the blended states" in sol.reason and "max violation" in sol.reason
+    warm = SolverOptions.warm_replan(case_options(case, True), 1e-6, 1e-3, True)
+    assert not warm.end_game.blend_restart and not warm.end_game.certify_infeasibility

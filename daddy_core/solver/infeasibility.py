@@ -63,11 +63,15 @@ def least_violation_problem(problem: Problem) -> Problem | None:
                    terminal_cost=miss, g_teq=None)
 
 
+def unmet(sol: Solution, opts: SolverOptions, out_of_time: bool) -> bool:
+    """``sol`` ended unconverged with constraints above tol_aul, not on its budget or a
+    cancel."""
+    return not sol.converged and not out_of_time and not sol.max_violation <= opts.aul.tol
+
+
 def wanted(sol: Solution, opts: SolverOptions, out_of_time: bool) -> bool:
-    """Certify ``sol``: it ended unconverged with constraints above tol_aul, not on its budget
-    or a cancel."""
-    return (not sol.converged and not out_of_time and not sol.max_violation <= opts.aul.tol
-            and opts.end_game.certify_infeasibility)
+    """Certify ``sol``: it ended unmet (``unmet``) and the options ask for the verdict."""
+    return unmet(sol, opts, out_of_time) and opts.end_game.certify_infeasibility
 
 
 def certify(problem: Problem, sol: Solution, opts: SolverOptions, solve_again,

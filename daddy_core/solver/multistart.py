@@ -33,6 +33,7 @@ import numpy as np
 
 from ..errors import DaddyError
 from ..problem import Problem
+from .blend import blended_states
 from .options import SolverOptions
 from .solution import Solution, WarmStart
 from .solve import solve
@@ -103,27 +104,6 @@ def structured_starts(problem: Problem, guess: np.ndarray | None = None) -> list
     if X is not None:
         starts.append(Start("blend", WarmStart(U=cold, X=X)))
     return starts
-
-
-def blended_states(problem: Problem) -> np.ndarray | None:
-    """(N+1, nx) the departure orbit and the arrival orbit joined by a smooth step (module
-    docstring), or None where either does not propagate to finite states."""
-    p = problem
-    zero = np.zeros(p.nu)
-    with np.errstate(all="ignore"):
-        departure = p.rollout(np.zeros((p.N, p.nu)))
-        arrival = np.empty_like(departure)
-        target = np.asarray(p.x_target, float)
-        arrival[-1] = departure[-1]
-        arrival[-1, :target.size] = target[:p.nx]
-        for k in range(p.N - 1, -1, -1):
-            arrival[k] = np.asarray(p.step(arrival[k + 1], zero, -p.stage_dt[k]), float)
-    if not (np.all(np.isfinite(departure)) and np.all(np.isfinite(arrival))):
-        return None
-    arrival[:, target.size:] = departure[:, target.size:]
-    t = np.concatenate([[0.0], np.cumsum(p.stage_dt)]) / float(np.sum(p.stage_dt))
-    s = (t * t * (3.0 - 2.0 * t))[:, None]
-    return (1.0 - s) * departure + s * arrival
 
 
 def random_starts(problem: Problem, n: int, seed: int = 0) -> list:

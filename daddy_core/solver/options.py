@@ -229,6 +229,7 @@ class EndGameOptions(_Group):
     resolves: int = 1                 # re-solves of the last step after a stalled KKT polishing
     path_exchange_rounds: int = 4     # exchange rounds of g_path between the nodes (0: none)
     certify_infeasibility: bool = True   # an unmet end gets a least-violation solve (infeasibility)
+    blend_restart: bool = True        # an unmet end is solved again from the blended states (blend)
 
     def __post_init__(self):
         _check(self, "end_game")
@@ -373,7 +374,8 @@ class SolverOptions:
         penalty started high and rho carried, no stall rules, no KKT residual, the polishing
         from DDP's maps with a wider active set, no per-stage trust region; a fuel-optimal
         plan restored in the exact fuel form first (``end_game.exact_start``); no
-        least-violation solve after an unmet end (``end_game.certify_infeasibility``)."""
+        least-violation solve and no restart after an unmet end
+        (``end_game.certify_infeasibility``, ``end_game.blend_restart``)."""
         return cold.with_(
             homotopy=cold.homotopy[-1:],
             ddp=dict(min_iter=1, short_step=0.5, carry_rho=True, stage_trust=False),
@@ -381,7 +383,7 @@ class SolverOptions:
             newton=dict(stall_iter=0, polish_from_ddp_maps=True,
                         active_tol=max(active_tol, cold.newton.active_tol)),
             kkt=dict(tol=math.inf), start=dict(restore=bool(restore_first)),
-            end_game=dict(exact_start=True, certify_infeasibility=False))
+            end_game=dict(exact_start=True, certify_infeasibility=False, blend_restart=False))
 
 
 # a warm re-plan's starting penalty: three growth steps below the cap, where a plan's

@@ -24,6 +24,7 @@ from ..policy import feedback_policy, fuel_policy
 from ..problem import Problem
 from . import end_game, infeasibility, path_exchange
 from .assemble import repropagation_miss, solution, unsolved
+from .blend import restart_from_blend
 from .context import Clock, SolveContext
 from .deadline import CancelFlag
 from .exact_start import exact_opening, exact_start_wanted
@@ -136,15 +137,32 @@ def _solve(problem: Problem, u_guess, method, fuel_optimal, polish, options, cas
     if problem.g_path is not None:
         sol = path_exchange.hold(problem, sol, lambda p, warm, o: once(p, warm, None, o), opts,
                                  progress)
+    def remaining():
+        return (None if opts.run.time_budget_s is None
+                else opts.run.time_budget_s - (time.perf_counter() - clock.start))
+
+    if (opts.end_game.blend_restart and not _state_guess(u_guess)
+            and infeasibility.unmet(sol, opts, clock.out_of_time())):
+        if progress is not None:
+            progress(f"  unmet constraints ({sol.max_violation:.2e}): solved again from the "
+                     "blended states")
+        again = restart_from_blend(problem, sol, opts, lambda p, guess, o: _solve(
+            p, guess, method, fuel_optimal, polish, o, case_name, progress, cancel), remaining())
+        if again is not None:
+            return again
     if not infeasibility.wanted(sol, opts, clock.out_of_time()):
         return sol
     if progress is not None:
         progress(f"  unmet constraints ({sol.max_violation:.2e}): a least-violation solve "
                  "asks whether any trajectory meets them")
-    remaining = (None if opts.run.time_budget_s is None
-                 else opts.run.time_budget_s - (time.perf_counter() - clock.start))
     return infeasibility.certify(problem, sol, opts, lambda p, U0, o: _solve(
-        p, U0, method, False, polish, o, case_name, progress, cancel), remaining)
+        p, U0, method, False, polish, o, case_name, progress, cancel), remaining())
+
+
+def _state_guess(guess) -> bool:
+    """The guess gives states (a ``WarmStart`` with X): a restart from the blend is another
+    state guess, not a fallback for it."""
+    return isinstance(guess, WarmStart) and guess.X is not None
 
 
 __all__ = ["repropagation_miss", "solve"]
