@@ -23,10 +23,14 @@ from ..problem import Problem
 from .options import SolverOptions
 from .solution import Solution, WarmStart
 
+PAPER_GUESS = 1e-6   # the paper's cold guess on every control component (``solve``'s default)
+
 
 def blended_states(problem: Problem) -> np.ndarray | None:
-    """(N+1, nx) the departure orbit and the arrival orbit joined by a smooth step (module
-    docstring), or None where either does not propagate to finite states."""
+    """(N+1, nx) the departure orbit (the ballistic rollout from x_0) and the arrival orbit
+    (x_target propagated backwards; the components the target does not give taken from the
+    departure) joined by the smooth step s = 3t^2 - 2t^3 of the normalised independent
+    variable t; None where either does not propagate to finite states."""
     p = problem
     zero = np.zeros(p.nu)
     with np.errstate(all="ignore"):
@@ -57,7 +61,8 @@ def restart_from_blend(problem: Problem, sol: Solution, opts: SolverOptions, sol
         return None
     o = opts.with_(run=dict(time_budget_s=remaining_s),
                    end_game=dict(blend_restart=False, certify_infeasibility=False))
-    again = solve_again(problem, WarmStart(U=np.full((problem.N, problem.nu), 1e-6), X=X), o)
+    cold = np.full((problem.N, problem.nu), PAPER_GUESS)
+    again = solve_again(problem, WarmStart(U=cold, X=X), o)
     if not again.converged:
         return None
     return replace(again, reason=f"{again.reason} (restarted from the blended states: the "

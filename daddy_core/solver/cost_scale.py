@@ -14,10 +14,10 @@ every node and no control -- a reference point that carries every constant of th
 terminal costs, so J + c and J have the same scale (|J - anchor|) and take the same steps. The
 smaller of the two distances is taken, so no test is looser than relative to |J|: for the
 catalogue's costs (energy or fuel, zero at zero control, and a terminal-miss penalty largest at
-x_0) it is |J| and nothing changes; a least-violation cost stays relative to the miss left, not to the miss
-removed; a landing that maximises the final mass is relative to the propellant spent, J = -E to
-the energy gained. The scale never falls below round-off of the cost itself (``ROUND_OFF`` |J|):
-a decrease smaller than that cannot be measured.
+x_0) it is |J| and nothing changes; a least-violation cost stays relative to the miss left, not
+to the miss removed; a landing that maximises the final mass is relative to the propellant
+spent, J = -E to the energy gained. The scale never falls below round-off of the cost itself
+(``ROUND_OFF`` |J|): a decrease smaller than that cannot be measured.
 """
 from __future__ import annotations
 

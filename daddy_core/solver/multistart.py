@@ -7,38 +7,34 @@ thrust, random): it is reached from states blended between the departure and arr
 which the Newton restoration turns into a trajectory (``WarmStart.X``). The starts:
 
 - structured (``structured_starts``): the cold guess (the case's, else the paper's 1e-6 on
-  every control), zero control (the ballistic flight), and the blended states -- the departure orbit (the ballistic
-  rollout from x_0) and the arrival orbit (x_target propagated backwards, the components the
-  target does not give taken from the departure) joined by a smooth step s(t) = 3t^2 - 2t^3 of
-  the normalised independent variable;
+  every control), zero control (the ballistic flight), and the blended states
+  (``blend.blended_states``: the departure and arrival orbits joined by a smooth step);
 - random (``random_starts``): controls of random directions and magnitudes up to the bound
   (``Problem.u_max``, else 1), from a seeded generator.
 
 Parallel in processes (``jobs``; forked, so a problem of lambdas needs no pickling) or on an
 executor of the caller's (``executor``: e.g. a Dask client's ``client.get_executor()``, which
-ships the problem by cloudpickle). Optima are
-distinct when their values differ by more than ``distinct_tol`` max(1, |value|) (relative for
-masses in kg, absolute for costs near 0, whose terms may cancel); the value is the final mass
-(larger is better) for a problem with a spacecraft and a mass state, else the cost.
+ships the problem by cloudpickle). Optima are distinct when their values differ by more than
+``distinct_tol`` max(1, |value|) (relative for masses in kg, absolute for costs near 0, whose
+terms may cancel); the value is the final mass (larger is better) for a problem with a
+spacecraft and a mass state, else the cost.
 """
 from __future__ import annotations
 
 import math
 import multiprocessing
 import time
-from concurrent.futures import ProcessPoolExecutor
+from concurrent.futures import Executor, ProcessPoolExecutor
 from dataclasses import dataclass, field
 
 import numpy as np
 
 from ..errors import DaddyError
 from ..problem import Problem
-from .blend import blended_states
+from .blend import PAPER_GUESS, blended_states
 from .options import SolverOptions
 from .solution import Solution, WarmStart
 from .solve import solve
-
-PAPER_GUESS = 1e-6   # the paper's cold guess on every control component (``solve``'s default)
 
 
 @dataclass(frozen=True)
@@ -143,16 +139,23 @@ def _solve_start(start: Start, problem: Problem | None = None, kwargs: dict | No
 
 
 def multistart(problem: Problem, starts: list | None = None, *, random: int = 8, seed: int = 0,
-               method="dyn", fuel_optimal: bool | None = None, polish: bool = True,
-               options: SolverOptions | None = None, case_name: str | None = None, jobs: int = 1, executor=None,
+               method: str = "dyn", fuel_optimal: bool | None = None, polish: bool = True,
+               options: SolverOptions | None = None, case_name: str | None = None,
+               jobs: int = 1, executor: Executor | None = None,
                distinct_tol: float = 1e-6) -> MultiStartResult:
     """Solve ``problem`` from every start and return the best converged optimum.
 
     Args:
+        problem: the ``Problem``.
         starts: ``Start`` list; None: ``structured_starts`` then ``random`` random ones
             (``random_starts`` with ``seed``).
-        method, fuel_optimal, polish, options, case_name: as ``solve`` (every start alike; a
-            time budget in the options bounds each start).
+        random: random starts after the structured ones (with ``starts`` None).
+        seed: the random starts' seed.
+        method: as ``solve`` (every start alike).
+        fuel_optimal: as ``solve``.
+        polish: as ``solve``.
+        options: as ``solve``; a time budget in them bounds each start.
+        case_name: as ``solve``.
         jobs: worker processes (forked) when no ``executor``; 1: in this process.
         executor: a ``concurrent.futures.Executor`` to run the starts on instead (a Dask
             client's ``get_executor()``); the problem and solutions must pickle there.

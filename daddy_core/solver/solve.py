@@ -24,7 +24,7 @@ from ..policy import feedback_policy, fuel_policy
 from ..problem import Problem
 from . import end_game, infeasibility, path_exchange
 from .assemble import repropagation_miss, solution, unsolved
-from .blend import restart_from_blend
+from .blend import PAPER_GUESS, restart_from_blend
 from .context import Clock, SolveContext
 from .deadline import CancelFlag
 from .exact_start import exact_opening, exact_start_wanted
@@ -120,7 +120,7 @@ def _solve(problem: Problem, u_guess, method, fuel_optimal, polish, options, cas
 
     def once(p: Problem, guess, fuel: bool | None, o: SolverOptions) -> Solution:
         warm = WarmStart.of(guess, p.stage_dt, o.ddp.carry_rho, p.t_start)
-        U0 = p.check_guess(np.full((p.N, p.nu), 1e-6) if warm.U is None else warm.U)
+        U0 = p.check_guess(np.full((p.N, p.nu), PAPER_GUESS) if warm.U is None else warm.U)
         ctx = SolveContext(p, method, o, homotopy_steps(p, U0, o, fuel), polish,
                            Clock(o.run.time_budget_s, cancel=cancel), progress=progress,
                            rho0=warm.rho)
