@@ -40,6 +40,7 @@ import numpy as np
 
 from daddy_core.catalogue import load_case, problem_from_case
 from daddy_core.solver import Globalization, case_options, solve
+from daddy_core.solver.multistart import random_starts, value_of
 
 # the paper's final masses (kg, Dyn method: Table 6 Earth-Mars fuel, Table 9 CR3BP) and the
 # double integrator's closed-form cost; a solution within WINDOW_KG (or 1e-6 relative on a cost)
@@ -51,18 +52,14 @@ WINDOW_KG = 0.5
 
 
 def guesses(case_name: str, n: int, seed: int) -> list[np.ndarray]:
-    """The paper's guess (1e-6 N on every component), zero thrust, then random guesses."""
+    """The paper's guess (1e-6 N on every component), zero thrust, then random guesses
+    (``multistart.random_starts``: random directions, magnitudes up to the bound)."""
     case = load_case(case_name)
     prob = problem_from_case(case)
     scale = float(case.units.thrust(case.solver.get("u_guess_n", 1e-6))) if case.spacecraft \
         else case.solver.get("u_guess_n", 1e-6)
-    bound = prob.u_max if prob.u_max else 1.0
     out = [np.full((prob.N, prob.nu), scale), np.zeros((prob.N, prob.nu))]
-    rng = np.random.default_rng(seed)
-    while len(out) < n:
-        d = rng.normal(size=(prob.N, prob.nu))
-        d /= np.linalg.norm(d, axis=1, keepdims=True)
-        out.append(d * rng.uniform(0.0, 1.0, size=(prob.N, 1)) * bound)
+    out += [s.guess for s in random_starts(prob, max(n - len(out), 0), seed)]
     return out[:n]
 
 
@@ -92,7 +89,7 @@ def run_one(job) -> dict:
     except Exception as exc:  # noqa: BLE001  a crash is a failed run, reported
         return {"ok": False, "value": float("nan"), "cpu_s": time.process_time() - t0,
                 "reason": f"raised {type(exc).__name__}: {exc}"}
-    value = sol.final_mass_kg if sol.final_mass_kg is not None else sol.cost
+    value = value_of(sol)
     in_window = _in_window(case_name, fuel, value, sol.final_mass_kg is not None, reference)
     held = sol.min_path_margin is None or sol.min_path_margin >= -1e-10
     feasible = sol.max_violation <= 1e-10 and in_window and held

@@ -1104,20 +1104,23 @@ def test_a_solve_that_diverges_from_a_random_guess_says_so_and_returns_its_start
     magnitudes up to the bound): its first DDP solve stalls under the line search and under
     the trust region with the thrust hundreds of times its bound; the solve ends there
     (``Status.AUL_DIVERGED``; 28-44 s where it used to run into any time cap) and returns the
-    start, finite, with the reason -- not the diverged iterate, not a polished one."""
+    start, finite, with the reason -- not the diverged iterate, not a polished one. (With the
+    default ``end_game.blend_restart`` that unmet end is then solved again from the blended
+    states, which converges: checked last.)"""
+    from daddy_core.solver.multistart import random_starts
     case = load_case("lyapunov_l1_l2")
     prob = problem_from_case(case)
-    rng = np.random.default_rng(0)
-    for _ in range(28 - 2):   # (bench_robustness.guesses: two fixed guesses, then random ones)
-        d = rng.normal(size=(prob.N, prob.nu))
-        d /= np.linalg.norm(d, axis=1, keepdims=True)
-        U0 = d * rng.uniform(0.0, 1.0, size=(prob.N, 1)) * prob.u_max
-    sol = solve(prob, U0, options=case_options(case, True))
+    # (bench_robustness.guesses: two fixed guesses, then ``random_starts``)
+    U0 = random_starts(prob, 28 - 2, seed=0)[-1].guess
+    sol = solve(prob, U0, options=case_options(case, True, end_game=dict(blend_restart=False)))
     assert not sol.converged
     assert "DDP diverged from the start" in sol.reason, sol.reason
     assert np.all(np.isfinite(sol.X)) and np.all(np.isfinite(sol.U))
     assert sol.max_violation < 1.0   # the start (0.27), not the diverged iterate (~300)
     assert sol.iterations["newton"] == 0
+    again = solve(prob, U0, options=case_options(case, True))
+    assert again.converged and "restarted from the blended states" in again.reason
+    assert "DDP diverged from the start" in again.reason
 
 
 def test_globalization_is_validated():
