@@ -10,10 +10,11 @@ from scipy.integrate import solve_ivp
 from scipy.optimize import minimize_scalar
 
 from daddy_core.catalogue import load_case, problem_from_case
+from daddy_core.catalogue.rendezvous import cw_rendezvous
 from daddy_core.da import functions as dm
 from daddy_core.errors import DaddyError
 from daddy_core.path_constraints import dense_margin
-from daddy_core.solver import Solution, case_options, solve
+from daddy_core.solver import Solution, SolverOptions, case_options, solve
 from daddy_ros.assessment import assess
 from daddy_ros.config import PLANS_DIR
 from daddy_ros.planner import GuidancePlanner
@@ -171,3 +172,36 @@ def test_keep_out_from_the_case_guess(r_min_km, closest_km, mass_kg):
     assert true_min >= r_min_km - 1e-5
     assert true_min == pytest.approx(closest_km, abs=5.0)
     assert sol.final_mass_kg == pytest.approx(mass_kg, abs=0.01)
+
+
+def test_ddp_blames_a_stage_once_between_accepted_steps():
+    """A Clohessy-Wiltshire rendezvous past a 1.5 km keep-out (``catalogue.rendezvous``; its
+    energy-optimal free path passes 1.31 km from the target), from the free optimum: the
+    augmented Lagrangian's first DDP solve (mu = 1) trades the terminal conditions for the
+    keep-out and ends 0.47 off; the second's first trial fails at four stages whose keep-out samples the other stages'
+    steps push into the sphere (the penalty's curvature there is the keep-out's, not the
+    quadratic model's). Bounding those stages' controls cannot mend that: blamed again and
+    again they held DDP at its nominal for all of ddp_max_iter, the violation frozen at 0.47
+    through every penalty up to mu_max. Blamed once between accepted steps, the next failure
+    is a shorter step for every stage, and the loop makes progress
+    (``globalization.blamed_stages``, design notes: blame once)."""
+    from daddy_core.solver.aul import aul
+    from daddy_core.solver.ddp import DDPStats
+    from daddy_core.solver.lagrangian import Multipliers
+    from daddy_core.solver.options import Method
+    from daddy_core.solver.sweeps import Stages
+
+    free = solve(cw_rendezvous(), fuel_optimal=False)
+    assert free.converged
+    problem = cw_rendezvous(keep_out_km=1.5)
+    assert dense_margin(problem, free.X, free.U).margin < -0.15   # the free path is inside
+    opts = SolverOptions(aul=dict(max_iter=3))
+    st = Stages(problem, free.X, free.U, Multipliers.initial(problem, opts.aul.mu_init),
+                (0.0, 1e-2), opts.eps_da)
+    lines = []
+    res = aul(st, Method.DYN, opts, DDPStats(), progress=lines.append)
+    violations = [line.figures["max_violation"] for line in lines
+                  if getattr(line, "figures", {}).get("max_violation") is not None]
+    first, last = violations[0], res.max_violation
+    assert first > 0.3                       # the trade of the first solve (0.47 measured)
+    assert last < 0.5 * first                # then on its way back (0.15 measured; 0.47 before)

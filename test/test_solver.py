@@ -1175,6 +1175,14 @@ def test_a_line_search_that_fails_at_a_few_stages_bounds_those_stages_only():
     assert 0 < crossed.size <= prob.N // 10
     blamed = G.blamed_stages(st, trial, stage_costs, expected, actual, tol)
     assert blamed.size and set(blamed) <= set(crossed)
+    # blamed once between accepted steps: the same stages failing again are not blamed again
+    # (a shorter step for every stage is next); a stage not blamed yet is
+    once = np.zeros(prob.N, dtype=bool)
+    once[blamed] = True
+    assert G.blamed_stages(st, trial, stage_costs, expected, actual, tol, blamed=once).size == 0
+    once[blamed[0]] = False
+    np.testing.assert_array_equal(
+        G.blamed_stages(st, trial, stage_costs, expected, actual, tol, blamed=once), blamed)
     bounds = np.full(prob.N, np.inf)
     bounds[blamed] = 0.5 * np.abs(trial.U[blamed, 0])
     clamped = D.forward_pass(st, gains, 1.0, dyn=False, clamp=bounds)

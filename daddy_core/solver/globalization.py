@@ -58,7 +58,8 @@ _LOCAL_FRACTION = 0.1
 
 
 def blamed_stages(st: Stages, trial: Trial, stage_costs: np.ndarray, expected: float,
-                   actual: float, tol: float, worth: float | None = None) -> np.ndarray:
+                   actual: float, tol: float, worth: float | None = None,
+                   blamed: np.ndarray | None = None) -> np.ndarray:
     """The stages whose stage-cost model failed on ``trial`` (its augmented stage costs
     ``stage_costs`` (N,)) enough to explain why it was rejected, (m,) indices (empty: the
     failure is not local).
@@ -74,7 +75,13 @@ def blamed_stages(st: Stages, trial: Trial, stage_costs: np.ndarray, expected: f
     more than ``_LOCAL_FRACTION`` of the stages, or a step whose ``worth`` (default: its whole
     expected decrease) is below ``tol`` (tol_ddp) relative to the cost (``Stages.scale``), whose
     gap is round-off
-    (design notes: local blame only)."""
+    (design notes: local blame only).
+
+    Not blamed again either: stages already blamed since the last accepted step (``blamed``,
+    (N,) bool, or None), when no other stage fails with them -- their bounded controls did not
+    mend the model, so its failure comes from the states the other stages' steps move them
+    to (a keep-out penalty's curvature at a sample the trajectory is pushed into), and only a
+    shorter step for every stage can (design notes: blame once)."""
     p = st.problem
     gap = expected - actual
     worth = expected if worth is None else worth
@@ -88,11 +95,14 @@ def blamed_stages(st: Stages, trial: Trial, stage_costs: np.ndarray, expected: f
     bad = np.flatnonzero(err > 0.1 * min(gap, expected))
     if bad.size == 0 or bad.size > _LOCAL_FRACTION * p.N or err[bad].sum() < 0.5 * gap:
         return np.empty(0, dtype=int)
+    if blamed is not None and np.all(blamed[bad]):
+        return np.empty(0, dtype=int)
     return bad
 
 
 def line_search(st: Stages, gains: Gains, a0: float, dyn: bool, opts: SolverOptions,
-                 J: float, clamp: np.ndarray | None = None) -> Trial | Blame | None:
+                 J: float, clamp: np.ndarray | None = None,
+                 blamed: np.ndarray | None = None) -> Trial | Blame | None:
     """Backtracking from step a0 (one step length at a time): the first step whose actual /
     expected decrease lies in (ls_min_ratio, ls_max_ratio), or that decreases the cost where
     the expected decrease is round-off. Returns that trial (with its cost), or -- when the
@@ -112,14 +122,16 @@ def line_search(st: Stages, gains: Gains, a0: float, dyn: bool, opts: SolverOpti
         if _accepted(expected, J - Jn, J, Jn, opts.ddp.ls_min_ratio, opts.ddp.ls_max_ratio):
             return trial
         if i == 0 and opts.ddp.stage_trust and math.isfinite(Jn):
-            bad = blamed_stages(st, trial, stage_costs, expected, J - Jn, opts.ddp.tol)
+            bad = blamed_stages(st, trial, stage_costs, expected, J - Jn, opts.ddp.tol,
+                                blamed=blamed)
             if bad.size:
                 return Blame(bad, 0.5 * np.linalg.norm(trial.dz[p.nx:, bad], axis=0))
     return None
 
 
 def trust_region_step(st: Stages, gains: Gains, dyn: bool, opts: SolverOptions,
-                       J: float, clamp: np.ndarray | None = None) -> Trial | Blame | None:
+                       J: float, clamp: np.ndarray | None = None,
+                       blamed: np.ndarray | None = None) -> Trial | Blame | None:
     """The full step of a trust-region sweep, accepted when its reduction ratio actual /
     expected lies within tr_ratio_tol of 1 (the quadratic model held). A rejected step whose
     failure a few stages explain (``blamed_stages``, with ``opts.ddp.stage_trust``) bounds those
@@ -143,7 +155,7 @@ def trust_region_step(st: Stages, gains: Gains, dyn: bool, opts: SolverOptions,
         # the region, not the model, makes a trust-region step's expected decrease small: a
         # gap worth DDP's stopping test is a model failure, not round-off
         bad = blamed_stages(st, trial, stage_costs, expected, actual, opts.ddp.tol,
-                             worth=expected - actual)
+                             worth=expected - actual, blamed=blamed)
         if bad.size:
             return Blame(bad, 0.5 * np.linalg.norm(trial.dz[st.problem.nx:, bad], axis=0))
     return None
@@ -166,6 +178,7 @@ class StepControl:
     alpha: float = 1.0
     radius: float = math.inf
     stage_radius: np.ndarray | None = None   # (N,) the line search's per-stage trust region
+    blamed: np.ndarray | None = None   # (N,) bool: stages blamed since the last accepted step
 
     @property
     def trust_region(self) -> bool:
@@ -180,14 +193,17 @@ class StepControl:
 
     def step(self, st: Stages, gains: Gains, J: float) -> Trial | Blame | None:
         if self.trust_region:
-            out = trust_region_step(st, gains, self.dyn, self.opts, J, self.stage_radius)
+            out = trust_region_step(st, gains, self.dyn, self.opts, J, self.stage_radius,
+                                    self.blamed)
         else:
             out = line_search(st, gains, self.alpha if self.dyn else 1.0, self.dyn, self.opts,
-                               J, self.stage_radius)
+                               J, self.stage_radius, self.blamed)
         if isinstance(out, Blame):
             if self.stage_radius is None:
                 self.stage_radius = np.full(st.problem.N, math.inf)
+                self.blamed = np.zeros(st.problem.N, dtype=bool)
             self.stage_radius[out.stages] = out.bounds
+            self.blamed[out.stages] = True
         return out
 
     def indefinite(self) -> Status | None:
@@ -207,6 +223,8 @@ class StepControl:
         return Status.LINE_SEARCH_FAILED if self.rho > o.ddp.rho_max else None
 
     def accepted(self, trial: Trial) -> None:
+        if self.blamed is not None:
+            self.blamed[:] = False
         if self.trust_region:   # eq. 37, growing (an unbounded region stays unbounded)
             self.radius *= 1.0 + self.opts.ddp.tr_kappa
             self.rho = _lower_rho(self.rho, self.opts)
