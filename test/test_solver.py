@@ -726,6 +726,25 @@ def test_a_trial_step_dividing_by_zero_mass_is_rejected_not_raised():
     assert np.all(np.isfinite(sol.X)) and np.all(np.isfinite(sol.U))
 
 
+def test_an_answer_cut_off_by_its_budget_keeps_the_thrust_bound():
+    """Earth-Mars from a guess at ten times the thrust bound with a budget that ends the solve
+    at once: the returned answer is its controls scaled onto the bound and the states flown
+    from x0 with them (``assemble.within_thrust_bound``), not the guess (which broke the bound
+    by 99 in g: Lyapunov from a random guess returned an iterate 41 times over the bound when
+    its 120 s ran out), and the reason says so."""
+    case = load_case("earth_mars")
+    prob = problem_from_case(case)
+    U0 = np.full((prob.N, 3), 10.0 * prob.u_max / np.sqrt(3.0))
+    sol = solve(prob, U0, fuel_optimal=True,
+                options=case_options(case, True, run=dict(time_budget_s=1e-6)))
+    assert not sol.converged
+    assert "scaled onto it" in sol.reason
+    np.testing.assert_allclose(np.linalg.norm(sol.U, axis=1), prob.u_max, rtol=1e-12)
+    np.testing.assert_allclose(sol.X, prob.rollout(sol.U), rtol=0, atol=1e-12)
+    bound = [r for r in sol.violations if r["label"] == "thrust bound"]
+    assert all(r["violation"] <= 1e-10 for r in bound)
+
+
 @pytest.mark.parametrize("nu", [1, 2, 3, 4])
 def test_trust_region_inverse_puts_the_step_on_the_boundary(nu):
     """The trust-region subproblem's shifted inverse: the step -(Quu + lam I)^-1 Qu has norm

@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import math
 import time
+from dataclasses import replace
 from typing import TYPE_CHECKING
 
 import numpy as np
@@ -98,11 +99,44 @@ def _linear_repropagation(problem: Problem, U: np.ndarray, X: np.ndarray | None,
     return X[-1] + E[-1]
 
 
+def within_thrust_bound(problem: Problem, X: np.ndarray, U: np.ndarray,
+                        tol: float) -> tuple[np.ndarray, np.ndarray, bool]:
+    """(X, U) of an answer, with every control whose norm exceeds the thrust bound
+    ``Problem.u_max`` by more than ``tol`` (relative) scaled onto it and the states flown
+    again from x0, and whether that was needed. A solve cut off by its time budget, or one
+    whose augmented Lagrangian never raised the penalty enough, ends at an iterate that can
+    break the bound many times over (Lyapunov from a random guess: 41 times, at 120 s); no
+    engine can fly that, so the answer is the nearest thrust that can be flown -- its
+    constraints' violations, reported with it, are then those of a flyable trajectory. Left
+    as it is when the flown states would not be finite, and for problems whose control is
+    not a thrust vector alone (no bound, or static parameters among the controls)."""
+    if not problem.u_max or problem.parameters is not None:
+        return X, U, False
+    norm = np.linalg.norm(U, axis=1)
+    over = norm > problem.u_max * (1.0 + tol)
+    if not np.any(over):
+        return X, U, False
+    V = U.copy()
+    V[over] *= (problem.u_max / norm[over])[:, None]
+    with np.errstate(all="ignore"):
+        Y = problem.rollout(V)
+    if not (np.all(np.isfinite(Y)) and np.all(np.isfinite(V))):
+        return X, U, False
+    return Y, V, True
+
+
 def solution(ctx: SolveContext, game: Game, case_name: str | None) -> Solution:
     """The Solution of the game's final end: its violations, the re-propagation check, the
-    verdict and reason, timings, iterations, gains and the duals a warm start takes."""
+    verdict and reason, timings, iterations, gains and the duals a warm start takes. An end
+    that breaks the thrust bound is answered within it (``within_thrust_bound``)."""
     problem, opts, end, hres = ctx.problem, ctx.opts, game.end, game.hres
-    X, U = end.X, end.U
+    X, U, bounded = within_thrust_bound(problem, end.X, end.U, opts.newton.tol)
+    if bounded:
+        game = replace(game, end=replace(end, X=X, U=U, maps=None, optimality=None, cost=None,
+                                         converged=False, reason=(
+            f"{end.reason}; the controls above the thrust bound were scaled onto it and the "
+            "trajectory flown again from x0")))
+        end = game.end
     violations = problem.violation_report(X, U)   # one evaluation of the constraints
     gmax = largest(0.0, *(r["violation"] for r in violations))
     with ctx.clock.phase("repropagation"):
