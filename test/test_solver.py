@@ -745,6 +745,26 @@ def test_an_answer_cut_off_by_its_budget_keeps_the_thrust_bound():
     assert all(r["violation"] <= 1e-10 for r in bound)
 
 
+def test_a_continuation_is_judged_by_its_last_step():
+    """``homotopy.joined``: the rest of the homotopy that converged from the end of a first step
+    that diverged gives the continuation's verdict (Lyapunov from random guesses, seed 2,
+    guesses 5 and 6: the rest converged at 997.4874 kg, polished to 1e-13, and the solve was
+    reported "diverged" without its KKT test; now it converges with the exact fuel form's
+    KKT residual 5.2e-5); a rest that failed keeps its own reason."""
+    from daddy_core.solver.homotopy import HomotopyResult, joined
+
+    def result(converged, reason, history):
+        return HomotopyResult(np.zeros((2, 1)), np.zeros((1, 1)), None, None, None, 0.0, 1,
+                              history, converged, reason, "", False)
+
+    first = result(False, "homotopy step 1: DDP diverged", [{"h": 0.0}])
+    rest = joined(first, result(True, "converged", [{"h": 0.5}, {"h": 0.999}]))
+    assert rest.converged and rest.reason == "converged"
+    assert rest.aul_iterations == 2 and [h["h"] for h in rest.history] == [0.0, 0.5, 0.999]
+    failed = joined(first, result(False, "homotopy step 2: aul_max_iter reached", []))
+    assert not failed.converged and failed.reason.startswith("homotopy step 2")
+
+
 @pytest.mark.parametrize("nu", [1, 2, 3, 4])
 def test_trust_region_inverse_puts_the_step_on_the_boundary(nu):
     """The trust-region subproblem's shifted inverse: the step -(Quu + lam I)^-1 Qu has norm

@@ -34,8 +34,9 @@ class HomotopyResult:
         mult: the multipliers at the end; gains: the last backward sweep's (or None).
         rho: Quu regularisation at the end of the last DDP solve.
         aul_iterations: summed over the steps; history: one summary dict per step.
-        converged: every step met tol_aul or stalled (``Status.AUL_STALLED``: the polishing
-            decides); reason: the first step that did neither, and why.
+        converged: the last step run met tol_aul or stalled (``Status.AUL_STALLED``: the
+            polishing decides) -- an earlier step's failure is superseded when the steps
+            after it converged from its end; reason: the last step that did neither, and why.
         stalled: the first step whose AUL stalled, and at what (empty if none).
         diverged: a step's first DDP solve diverged (``Status.AUL_DIVERGED``): X, U are that
             step's start, where DDP could not converge (no polishing follows: the solve
@@ -135,6 +136,8 @@ def continuation(problem: Problem, X, U, steps: tuple, method: Method, opts: Sol
             converged, reason = False, f"homotopy step {i + 1}: {res.reason}"
             if res.status in (Status.TIME_BUDGET, Status.CANCELLED, Status.AUL_DIVERGED):
                 break
+        else:   # (a step that converged from a failed one's end: the verdict is the last's)
+            converged, reason = True, "converged"
     return HomotopyResult(best[0], best[1], res.stages, mult, gains, res.rho, aul_iterations,
                           history, converged, reason, stalled,
                           res.status is Status.AUL_DIVERGED)
@@ -159,10 +162,11 @@ def resume_duals(problem: Problem, done: HomotopyResult, opts: SolverOptions) ->
 
 def joined(done: HomotopyResult, more: HomotopyResult) -> HomotopyResult:
     """One continuation's result from two that ran one after the other: the later one's end,
-    the iterations and the history summed, converged when both were."""
+    the iterations and the history summed, and the later one's verdict -- a continuation is
+    judged by its last step, as ``continuation`` judges its own (design notes: the last
+    step's verdict): the first step's failure is superseded when the rest converged from its
+    end, whose answer Newton and the KKT test then judge."""
     return replace(more, gains=more.gains or done.gains,
                    aul_iterations=done.aul_iterations + more.aul_iterations,
                    history=done.history + more.history,
-                   converged=done.converged and more.converged,
-                   reason=more.reason if done.converged else done.reason,
                    stalled=done.stalled or more.stalled)
