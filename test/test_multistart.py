@@ -162,19 +162,3 @@ def test_a_solve_stalled_short_of_its_target_is_restarted_from_the_blend():
     assert "restarted from the blended states" in sol.reason and "max violation" in sol.reason
     warm = SolverOptions.warm_replan(case_options(case, True), 1e-6, 1e-3, True)
     assert not warm.end_game.blend_restart and not warm.end_game.certify_infeasibility
-
-
-def test_any_unconverged_end_but_the_budget_is_worth_a_restart_from_the_blend():
-    """``blend.worth_restarting``: unmet constraints, and also a feasible end whose KKT
-    polishing stalled far from a stationary point (Lyapunov from random guesses: 995-997 kg with a
-    KKT residual of 1.4-1.6, converged at 997.4874 kg from the blend) are restarted; a converged
-    solve, and one stopped by its budget or a cancel, are not."""
-    from types import SimpleNamespace
-
-    from daddy_core.solver.blend import worth_restarting
-    unmet = SimpleNamespace(converged=False, max_violation=0.2)
-    stalled = SimpleNamespace(converged=False, max_violation=0.0)
-    done = SimpleNamespace(converged=True, max_violation=0.0)
-    assert worth_restarting(unmet, False) and worth_restarting(stalled, False)
-    assert not worth_restarting(done, False)
-    assert not worth_restarting(unmet, True) and not worth_restarting(stalled, True)
