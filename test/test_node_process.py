@@ -36,18 +36,24 @@ class Manager:
         self.node.create_subscription(DiagnosticArray, "/diagnostics",
                                       lambda m: self.diags.extend(m.status), 50)
 
-    def call(self, client, request, timeout=20.0):
+    def call(self, client, request, timeout=20.0, attempts=1):
+        """The service's answer, each attempt waiting ``timeout``. A request sent just as the
+        service is discovered can be lost before its reply path is matched (a fresh-clone run
+        once waited 20 s for its first get_state): an idempotent query asks again."""
         assert client.wait_for_service(timeout_sec=timeout), client.srv_name
-        fut = client.call_async(request)
-        rclpy.spin_until_future_complete(self.node, fut, timeout_sec=timeout)
-        assert fut.done(), f"{client.srv_name}: no answer"
-        return fut.result()
+        for _ in range(attempts):
+            fut = client.call_async(request)
+            rclpy.spin_until_future_complete(self.node, fut, timeout_sec=timeout)
+            if fut.done():
+                return fut.result()
+            client.remove_pending_request(fut)
+        raise AssertionError(f"{client.srv_name}: no answer in {attempts} attempts")
 
     def transition(self, tid) -> bool:
         return self.call(self.change, ChangeState.Request(transition=Transition(id=tid))).success
 
     def state(self) -> int:
-        return self.call(self.get, GetState.Request()).current_state.id
+        return self.call(self.get, GetState.Request(), attempts=3).current_state.id
 
     def start_bond(self):
         from bond.msg import Status
