@@ -217,7 +217,7 @@ def tracking_problem(problem: Problem, U) -> Problem:
     def corrected(x, v, d, t0):
         at = np.searchsorted(edges, t0)
         ref, s = U[at].T, scale[at].T                   # (nu,) or (nu, B); (1,) or (1, B)
-        if ref.ndim == 1:
+        if ref.ndim == 1 and np.ndim(v) == 2:         # one stage, a batch of controls
             ref, s = ref[:, None], s[:, None]
         return step(x, v * s + ref, d, t0)
 

@@ -162,3 +162,24 @@ def test_a_solve_stalled_short_of_its_target_is_restarted_from_the_blend():
     assert "restarted from the blended states" in sol.reason and "max violation" in sol.reason
     warm = SolverOptions.warm_replan(case_options(case, True), 1e-6, 1e-3, True)
     assert not warm.end_game.blend_restart and not warm.end_game.certify_infeasibility
+
+
+def test_an_unmet_end_or_one_far_from_stationary_is_worth_a_restart_from_the_blend():
+    """``blend.worth_restarting``: unmet constraints, and also a feasible end whose KKT
+    polishing stalled far from a stationary point (Lyapunov from random guesses: 991-997 kg
+    with a KKT residual of 1.4-1.7, converged at 997.4874 kg from the blend) are restarted; a
+    converged solve, a polishing stalled near a stationary point (tight tolerances), and one
+    stopped by its budget or a cancel are not."""
+    from types import SimpleNamespace
+
+    from daddy_core.solver import SolverOptions
+    from daddy_core.solver.blend import FAR_FROM_STATIONARY, worth_restarting
+    opts = SolverOptions()
+    unmet = SimpleNamespace(converged=False, max_violation=0.2, kkt_residual=None)
+    far = SimpleNamespace(converged=False, max_violation=0.0, kkt_residual=1.5)
+    near = SimpleNamespace(converged=False, max_violation=0.0,
+                           kkt_residual=0.5 * FAR_FROM_STATIONARY)
+    done = SimpleNamespace(converged=True, max_violation=0.0, kkt_residual=1e-9)
+    assert worth_restarting(unmet, opts, False) and worth_restarting(far, opts, False)
+    assert not worth_restarting(near, opts, False) and not worth_restarting(done, opts, False)
+    assert not worth_restarting(unmet, opts, True) and not worth_restarting(far, opts, True)

@@ -261,6 +261,18 @@ def test_tracking_laws_are_the_least_correction_of_any_feasible_plan(raise_plan,
     assert errors[0] >= 5 * errors[1] and errors[1] >= 5 * errors[2]
 
 
+def test_the_tracking_problem_steps_one_state_as_the_plan_does(raise_plan):
+    """A float call with one state and one correction (as a backward propagation makes) is
+    the plan's stage flown with the corrected control, for every stage (it was an (nu, nu)
+    control: the one-stage reshape meant for batches)."""
+    problem, sol = raise_plan
+    tracking = tracking_problem(problem, sol.U)
+    for k in (0, 17, problem.N - 1):
+        x, t0, dt = sol.X[k], problem.stage_t0[k], problem.stage_dt[k]
+        np.testing.assert_allclose(tracking.step(x, np.zeros(2), dt, t0),
+                                   problem.step(x, sol.U[k], dt, t0), rtol=0, atol=1e-15)
+
+
 def test_flying_tracking_laws_stage_by_stage_meets_the_terminal_rows(raise_plan):
     """Flown in closed loop from a perturbed start (the last stage, which cannot move three
     terminal rows alone, has no law and flies the plan), the order-2 laws end >= 50x nearer

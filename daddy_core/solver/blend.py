@@ -8,10 +8,13 @@ and the arrival orbit joined by a smooth step, handed to the Newton restoration 
 guess -- converges to the paper's optimum (997.487 kg, 21 s).
 
 ``restart_from_blend`` (``EndGameOptions.blend_restart``, on by default, off in the guidance
-node's warm re-plans): a solve that ended unconverged on its constraints (what would go to the
-infeasibility verdict) is solved once more from the blended states; its answer is kept when it
-converged, else the verdict is reached from the first solve's end as before. Never for a
-solve that started from a state guess (it would start where it failed).
+node's warm re-plans): a solve that ended unconverged, not on its budget or a cancel
+(``worth_restarting``) -- on its constraints (what would go to the infeasibility verdict), or
+feasible at a point its KKT polishing could not take to a stationary one (Lyapunov from random
+guesses: a homotopy that ended 0.3-5.8 kg below the optimum with a KKT residual of 1.4-1.7) --
+is solved once more from the blended states; its answer is kept when it converged, else the
+first solve's answer and verdict stand. Never for a solve that started from a state guess (it
+would start where it failed).
 """
 from __future__ import annotations
 
@@ -24,6 +27,11 @@ from .options import SolverOptions
 from .solution import Solution, WarmStart
 
 PAPER_GUESS = 1e-6   # the paper's cold guess on every control component (``solve``'s default)
+# A feasible end with a KKT residual (relative to the largest cost-gradient component) above
+# this is not near a stationary point: worth a restart (100x the default tol_optimality; the
+# polishing stalls of tight tolerances, 1e-7-1e-5, are round-off near one, where a restart
+# from elsewhere would only cost time).
+FAR_FROM_STATIONARY = 1e-2
 
 
 def blended_states(problem: Problem) -> np.ndarray | None:
@@ -49,6 +57,17 @@ def blended_states(problem: Problem) -> np.ndarray | None:
     return (1.0 - s) * departure + s * arrival
 
 
+def worth_restarting(sol: Solution, opts: SolverOptions, out_of_time: bool) -> bool:
+    """``sol`` ended unconverged, not on its budget or a cancel, either on its constraints
+    (max violation above tol_aul) or feasible with a KKT residual above FAR_FROM_STATIONARY
+    (module docstring)."""
+    if sol.converged or out_of_time:
+        return False
+    if not sol.max_violation <= opts.aul.tol:
+        return True
+    return sol.kkt_residual is not None and sol.kkt_residual > FAR_FROM_STATIONARY
+
+
 def restart_from_blend(problem: Problem, sol: Solution, opts: SolverOptions, solve_again,
                        remaining_s: float | None) -> Solution | None:
     """The solve from the blended states (module docstring) when it converged, else None.
@@ -66,5 +85,5 @@ def restart_from_blend(problem: Problem, sol: Solution, opts: SolverOptions, sol
     if not again.converged:
         return None
     return replace(again, reason=f"{again.reason} (restarted from the blended states: the "
-                                 f"solve from the guess had ended unmet, max violation "
+                                 f"solve from the guess had ended unconverged, max violation "
                                  f"{sol.max_violation:.2e}: {sol.reason})")

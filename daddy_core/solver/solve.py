@@ -24,7 +24,7 @@ from ..policy import feedback_policy, fuel_policy
 from ..problem import Problem
 from . import end_game, infeasibility, path_exchange
 from .assemble import repropagation_miss, solution, unsolved
-from .blend import PAPER_GUESS, restart_from_blend
+from .blend import PAPER_GUESS, restart_from_blend, worth_restarting
 from .context import Clock, SolveContext
 from .deadline import CancelFlag
 from .exact_start import exact_opening, exact_start_wanted
@@ -142,10 +142,10 @@ def _solve(problem: Problem, u_guess, method, fuel_optimal, polish, options, cas
                 else opts.run.time_budget_s - (time.perf_counter() - clock.start))
 
     if (opts.end_game.blend_restart and not _state_guess(u_guess)
-            and infeasibility.unmet(sol, opts, clock.out_of_time())):
+            and worth_restarting(sol, opts, clock.out_of_time())):
         if progress is not None:
-            progress(f"  unmet constraints ({sol.max_violation:.2e}): solved again from the "
-                     "blended states")
+            progress(f"  unconverged (max violation {sol.max_violation:.2e}): solved again "
+                     "from the blended states")
         again = restart_from_blend(problem, sol, opts, lambda p, guess, o: _solve(
             p, guess, method, fuel_optimal, polish, o, case_name, progress, cancel), remaining())
         if again is not None:
