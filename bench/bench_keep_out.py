@@ -15,9 +15,7 @@ from __future__ import annotations
 import argparse
 import time
 
-import numpy as np
-
-from daddy_core.catalogue.rendezvous import cw_rendezvous
+from daddy_core.catalogue.rendezvous import cw_rendezvous, propellant
 from daddy_core.catalogue.rendezvous_reference import slsqp_reference
 from daddy_core.solver import SolverOptions, solve
 
@@ -36,7 +34,7 @@ def main() -> None:
         t0 = time.process_time()
         sol = solve(problem, fuel_optimal=True, options=opts)
         cpu = time.process_time() - t0
-        fuel = float(np.sum(np.linalg.norm(sol.U, axis=1)) * problem.stage_dt[0])
+        fuel = propellant(sol.U, problem.stage_dt)
         rows[label] = (cpu, fuel)
         margin = "" if sol.min_path_margin is None else f", margin {sol.min_path_margin:+.2e} km"
         print(f"daddy {label:9s} CPU {cpu:7.2f} s, propellant {fuel:.8f}, converged "

@@ -20,6 +20,11 @@ from ..problem import Problem, flow_step
 A_MAX = 0.5   # thrust acceleration bound [km / (1/n)^2]
 
 
+def propellant(U, stage_dt) -> float:
+    """sum_k |u_k| dt_k of controls U (N, 3) [km/(1/n)]: the rendezvous's propellant measure."""
+    return float(np.sum(np.linalg.norm(np.asarray(U, float), axis=1) * np.asarray(stage_dt)))
+
+
 def cw_rhs(t, x, u):
     """Clohessy-Wiltshire equations with n = 1: x = [r (3), v (3)], u = thrust acceleration."""
     return dm.stack([x[3], x[4], x[5], 3.0 * x[0] + 2.0 * x[4] + u[0], -2.0 * x[3] + u[1],

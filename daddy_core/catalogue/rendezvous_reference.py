@@ -9,7 +9,7 @@ from __future__ import annotations
 import numpy as np
 from scipy.optimize import minimize
 
-from .rendezvous import A_MAX
+from .rendezvous import A_MAX, propellant
 
 
 def _stage_matrices(h: float, steps: int) -> tuple[np.ndarray, np.ndarray]:
@@ -31,7 +31,7 @@ def slsqp_reference(problem, keep_out_km: float | None, samples: int = 8
     """SLSQP's propellant optimum of the rendezvous ``problem`` (``cw_rendezvous``) without and
     with a keep-out sphere of ``keep_out_km`` held at ``samples`` points per stage (free
     first, then the keep-out from the free optimum): (free propellant, kept propellant,
-    kept U (N, 3); None, None without a keep-out); propellant = sum_k |u_k| dt [km/(1/n)].
+    kept U (N, 3); None, None without a keep-out); propellant: ``rendezvous.propellant``.
     Raises RuntimeError when SLSQP fails."""
     N, dt = problem.N, float(problem.stage_dt[0])
     P, Q = _stage_matrices(dt, 4)
@@ -97,8 +97,7 @@ def slsqp_reference(problem, keep_out_km: float | None, samples: int = 8
         return r.x[:3 * N].reshape(N, 3)
 
     free = run(np.full((N, 3), 0.01), False)
-    total = lambda U: float(np.sum(np.linalg.norm(U, axis=1)) * dt)  # noqa: E731
     if keep_out_km is None:
-        return total(free), None, None
+        return propellant(free, problem.stage_dt), None, None
     kept = run(free, True)
-    return total(free), total(kept), kept
+    return propellant(free, problem.stage_dt), propellant(kept, problem.stage_dt), kept

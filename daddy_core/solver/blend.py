@@ -23,6 +23,7 @@ from dataclasses import replace
 import numpy as np
 
 from ..problem import Problem
+from .infeasibility import unmet
 from .options import SolverOptions
 from .solution import Solution, WarmStart
 
@@ -63,9 +64,8 @@ def worth_restarting(sol: Solution, opts: SolverOptions, out_of_time: bool) -> b
     (module docstring)."""
     if sol.converged or out_of_time:
         return False
-    if not sol.max_violation <= opts.aul.tol:
-        return True
-    return sol.kkt_residual is not None and sol.kkt_residual > FAR_FROM_STATIONARY
+    return unmet(sol, opts, out_of_time) or (sol.kkt_residual is not None
+                                             and sol.kkt_residual > FAR_FROM_STATIONARY)
 
 
 def restart_from_blend(problem: Problem, sol: Solution, opts: SolverOptions, solve_again,
