@@ -183,3 +183,20 @@ def test_an_unmet_end_or_one_far_from_stationary_is_worth_a_restart_from_the_ble
     assert worth_restarting(unmet, opts, False) and worth_restarting(far, opts, False)
     assert not worth_restarting(near, opts, False) and not worth_restarting(done, opts, False)
     assert not worth_restarting(unmet, opts, True) and not worth_restarting(far, opts, True)
+    # the blend is a guess for the restoration: without it there is nothing to restart from
+    unrestored = opts.with_(start=dict(restore=False))
+    assert not worth_restarting(unmet, unrestored, False)
+    assert not worth_restarting(far, unrestored, False)
+
+
+def test_a_blend_the_dynamics_cannot_fly_is_none():
+    """Dynamics that raise an ArithmeticError on floats while the blend is flown (PDDP's
+    costate flow from its target's placeholder mass divides by zero) give no blend, not an
+    exception out of the solve's fallback."""
+    p = _double_well()
+
+    def step(x, u, dt):
+        if dt < 0:
+            raise ZeroDivisionError("float division by zero")
+        return p.step(x, u, dt)
+    assert blended_states(Problem(**{**p.__dict__, "step": step})) is None

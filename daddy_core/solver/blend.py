@@ -39,17 +39,22 @@ def blended_states(problem: Problem) -> np.ndarray | None:
     """(N+1, nx) the departure orbit (the ballistic rollout from x_0) and the arrival orbit
     (x_target propagated backwards; the components the target does not give taken from the
     departure) joined by the smooth step s = 3t^2 - 2t^3 of the normalised independent
-    variable t; None where either does not propagate to finite states."""
+    variable t; None where either does not propagate to finite states (an ArithmeticError
+    of the dynamics on floats included: PDDP's costate flow from its target, whose mass entry
+    is a placeholder 0, divides by the mass)."""
     p = problem
     zero = np.zeros(p.nu)
-    with np.errstate(all="ignore"):
-        departure = p.rollout(np.zeros((p.N, p.nu)))
-        arrival = np.empty_like(departure)
-        target = np.asarray(p.x_target, float)
-        arrival[-1] = departure[-1]
-        arrival[-1, :target.size] = target[:p.nx]
-        for k in range(p.N - 1, -1, -1):
-            arrival[k] = np.asarray(p.step(arrival[k + 1], zero, -p.stage_dt[k]), float)
+    try:
+        with np.errstate(all="ignore"):
+            departure = p.rollout(np.zeros((p.N, p.nu)))
+            arrival = np.empty_like(departure)
+            target = np.asarray(p.x_target, float)
+            arrival[-1] = departure[-1]
+            arrival[-1, :target.size] = target[:p.nx]
+            for k in range(p.N - 1, -1, -1):
+                arrival[k] = np.asarray(p.step(arrival[k + 1], zero, -p.stage_dt[k]), float)
+    except ArithmeticError:
+        return None
     if not (np.all(np.isfinite(departure)) and np.all(np.isfinite(arrival))):
         return None
     arrival[:, target.size:] = departure[:, target.size:]
@@ -61,8 +66,10 @@ def blended_states(problem: Problem) -> np.ndarray | None:
 def worth_restarting(sol: Solution, opts: SolverOptions, out_of_time: bool) -> bool:
     """``sol`` ended unconverged, not on its budget or a cancel, either on its constraints
     (max violation above tol_aul) or feasible with a KKT residual above FAR_FROM_STATIONARY
-    (module docstring)."""
-    if sol.converged or out_of_time:
+    (module docstring). Never without ``StartOptions.restore``: the blended states are a guess
+    for the restoration, and without it the restart would solve the paper's cold controls
+    (PDDP's costate stages: a zero primer vector)."""
+    if sol.converged or out_of_time or not opts.start.restore:
         return False
     return unmet(sol, opts, out_of_time) or (sol.kkt_residual is not None
                                              and sol.kkt_residual > FAR_FROM_STATIONARY)
