@@ -86,10 +86,13 @@ def _pddp(case_name: str, sigma0, cap: float) -> tuple:
     guess = _continuous(costate_problem(case, o.stages, o.sharpness[0]), sigma0)
     opts = PDDPOptions(solver=o.solver.with_(run=dict(time_budget_s=cap)))
     t = time.process_time()
-    r = solve_pddp(case, guess, opts)
+    try:
+        r = solve_pddp(case, guess, opts)
+    except Exception as exc:  # noqa: BLE001  a crash is a failed run, reported
+        return False, float("nan"), time.process_time() - t, f"{type(exc).__name__}: {exc}"
     ok = (r.solution.converged and r.solution.max_violation <= SUCCESS_VIOLATION
           and r.rho == o.sharpness[-1])
-    return ok, r.final_mass_kg, time.process_time() - t
+    return ok, r.final_mass_kg, time.process_time() - t, ""
 
 
 def _shoot(case_name: str, sigma0) -> tuple:
@@ -149,6 +152,9 @@ def robustness(case_name: str, n: int, half_width: float, seed: int, cap: float,
                   f"{np.median(masses):.3f})" if len(ok) else "")
         print(f"{label:16s} {len(ok):4d} / {n} converged ({100 * len(ok) / n:.1f} %){spread}; "
               f"CPU median {np.median(cpu):.1f} s, max {cpu.max():.1f} s")
+    for i, r in enumerate(pddp):
+        if r[3]:
+            print(f"PDDP guess {i} raised {r[3]}")
     both = sum(a[0] and b[0] for a, b in zip(pddp, shoot))
     n_pddp, n_shoot = sum(r[0] for r in pddp), sum(r[0] for r in shoot)
     print(f"both {both}, PDDP alone {n_pddp - both}, shooting alone {n_shoot - both}; "
