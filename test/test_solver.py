@@ -1283,3 +1283,24 @@ def test_a_cancel_flag_stops_the_solve_within_one_iteration_with_a_finite_answer
     assert not sol.converged and "cancelled by the caller" in sol.reason
     assert sol.iterations["ddp"] <= 1
     assert np.all(np.isfinite(sol.U)) and np.all(np.isfinite(sol.X))
+
+
+def test_a_drift_check_whose_flows_do_not_integrate_keeps_the_nominal():
+    """``aul_safeguards.without_drift`` where the stage maps have walked beyond their radius
+    and neither the restoration nor the controls' exact rollout integrates (DRO 3 revolutions
+    from a random guess: a near-collision the drifted states hid raised "rk78 exceeded
+    max_steps" out of ``solve``): the nominal stays, and no exception leaves the safeguard."""
+    from dataclasses import replace
+
+    from daddy_core.solver.aul_safeguards import without_drift
+    from daddy_core.solver.lagrangian import Multipliers
+    from daddy_core.solver.sweeps import Stages
+    prob = _double_integrator_3d()
+    U = np.full((prob.N, 3), 0.5)
+    st = Stages(prob, prob.rollout(U), U, Multipliers.initial(prob, 1.0), (0.0, 1.0), 1e-12)
+
+    def singular(x, u, dt):
+        raise DaddyError("rk78 exceeded max_steps=10000 (stiff or singular dynamics?)")
+    st.problem = replace(prob, step=singular)
+    st.radius, st.walked = np.zeros(prob.N), np.ones(prob.N)   # (linear maps: radius inf)
+    assert without_drift(st, SolverOptions(), None) is st

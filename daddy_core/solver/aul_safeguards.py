@@ -13,6 +13,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from ..errors import DaddyError
 from . import newton
 from .deadline import Deadline
 from .lagrangian import Multipliers
@@ -44,7 +45,8 @@ def fallback_options(res, opts: SolverOptions) -> SolverOptions | None:
 def without_drift(st: Stages, opts: SolverOptions, deadline: Deadline | None) -> Stages:
     """``st``, or -- when its states have drifted from the dynamics -- the expansions of a
     consistent trajectory near it: Newton's restoration (its stage defects and constraints to
-    tol_newton; the controls' exact rollout when Newton fails).
+    tol_newton; the controls' exact rollout when Newton fails; ``st`` itself when that rollout
+    does not integrate either -- a near-collision the drifted states hid).
 
     A map re-centred after every accepted step (``sweeps.new_maps``) walks away from where it
     was expanded; the stages whose maps walked beyond their radius (``Stages.walked``) are
@@ -54,11 +56,23 @@ def without_drift(st: Stages, opts: SolverOptions, deadline: Deadline | None) ->
     k = np.flatnonzero(st.walked > st.radius)
     if k.size == 0:
         return st
-    flows = p.step(st.X[k].T, st.U[k].T, p.stage_dt[k], p.stage_t0[k])
-    if not np.max(np.abs(flows - st.X[k + 1].T)) > st.eps_da:
+    try:
+        with np.errstate(invalid="ignore", over="ignore", divide="ignore"):
+            flows = p.step(st.X[k].T, st.U[k].T, p.stage_dt[k], p.stage_t0[k])
+        drifted = bool(np.max(np.abs(flows - st.X[k + 1].T)) > st.eps_da)
+    except (DaddyError, ArithmeticError):   # a flow that does not integrate: drift too
+        drifted = True
+    if not drifted:
         return st
     res = newton.polish(p, st.X, st.U, opts, deadline)
-    X, U = (res.X, res.U) if res.converged else (p.rollout(st.U), st.U)
+    if res.converged:
+        X, U = res.X, res.U
+    else:
+        try:   # the exact flow of drifted controls may not integrate (a near-collision)
+            with np.errstate(invalid="ignore", over="ignore", divide="ignore"):
+                X, U = p.rollout(st.U), st.U
+        except (DaddyError, ArithmeticError):   # (as a non-finite rollout: st stays)
+            return st
     if not (np.all(np.isfinite(X)) and np.all(np.isfinite(U))):
         return st
     return Stages(p, X, U, st.mult, st.hom, st.eps_da)
