@@ -189,14 +189,16 @@ def test_an_unmet_end_or_one_far_from_stationary_is_worth_a_restart_from_the_ble
     assert not worth_restarting(far, unrestored, False)
 
 
-def test_a_blend_the_dynamics_cannot_fly_is_none():
-    """Dynamics that raise an ArithmeticError on floats while the blend is flown (PDDP's
-    costate flow from its target's placeholder mass divides by zero) give no blend, not an
-    exception out of the solve's fallback."""
+@pytest.mark.parametrize("error", [ZeroDivisionError("float division by zero"),
+                                   DaddyError("rk78 exceeded max_steps=10000")])
+def test_a_blend_the_dynamics_cannot_fly_is_none(error):
+    """Dynamics that raise while the blend is flown (PDDP's costate flow from its target's
+    placeholder mass divides by zero; an integration through a singularity runs out of steps)
+    give no blend, not an exception out of the solve's fallback."""
     p = _double_well()
 
     def step(x, u, dt):
         if dt < 0:
-            raise ZeroDivisionError("float division by zero")
+            raise error
         return p.step(x, u, dt)
     assert blended_states(Problem(**{**p.__dict__, "step": step})) is None

@@ -22,6 +22,7 @@ from dataclasses import replace
 
 import numpy as np
 
+from ..errors import DaddyError
 from ..problem import Problem
 from .infeasibility import unmet
 from .options import SolverOptions
@@ -39,9 +40,9 @@ def blended_states(problem: Problem) -> np.ndarray | None:
     """(N+1, nx) the departure orbit (the ballistic rollout from x_0) and the arrival orbit
     (x_target propagated backwards; the components the target does not give taken from the
     departure) joined by the smooth step s = 3t^2 - 2t^3 of the normalised independent
-    variable t; None where either does not propagate to finite states (an ArithmeticError
-    of the dynamics on floats included: PDDP's costate flow from its target, whose mass entry
-    is a placeholder 0, divides by the mass)."""
+    variable t; None where either does not propagate to finite states (a flow that raises
+    included: PDDP's costate flow from its target, whose mass entry is a placeholder 0,
+    divides by the mass; an integration through a singularity exceeds its steps)."""
     p = problem
     zero = np.zeros(p.nu)
     try:
@@ -53,7 +54,7 @@ def blended_states(problem: Problem) -> np.ndarray | None:
             arrival[-1, :target.size] = target[:p.nx]
             for k in range(p.N - 1, -1, -1):
                 arrival[k] = np.asarray(p.step(arrival[k + 1], zero, -p.stage_dt[k]), float)
-    except ArithmeticError:
+    except (DaddyError, ArithmeticError):   # (an integration that cannot go on, 1 / 0)
         return None
     if not (np.all(np.isfinite(departure)) and np.all(np.isfinite(arrival))):
         return None
