@@ -56,26 +56,24 @@ def without_drift(st: Stages, opts: SolverOptions, deadline: Deadline | None) ->
     k = np.flatnonzero(st.walked > st.radius)
     if k.size == 0:
         return st
-    try:
-        with np.errstate(invalid="ignore", over="ignore", divide="ignore"):
-            flows = p.step(st.X[k].T, st.U[k].T, p.stage_dt[k], p.stage_t0[k])
-        drifted = bool(np.max(np.abs(flows - st.X[k + 1].T)) > st.eps_da)
-    except (DaddyError, ArithmeticError):   # a flow that does not integrate: drift too
-        drifted = True
-    if not drifted:
-        return st
+    flows = _flown(lambda: p.step(st.X[k].T, st.U[k].T, p.stage_dt[k], p.stage_t0[k]))
+    if flows is not None and not np.max(np.abs(flows - st.X[k + 1].T)) > st.eps_da:
+        return st   # (a flow that does not integrate counts as drift)
     res = newton.polish(p, st.X, st.U, opts, deadline)
-    if res.converged:
-        X, U = res.X, res.U
-    else:
-        try:   # the exact flow of drifted controls may not integrate (a near-collision)
-            with np.errstate(invalid="ignore", over="ignore", divide="ignore"):
-                X, U = p.rollout(st.U), st.U
-        except (DaddyError, ArithmeticError):   # (as a non-finite rollout: st stays)
-            return st
-    if not (np.all(np.isfinite(X)) and np.all(np.isfinite(U))):
+    X, U = (res.X, res.U) if res.converged else (_flown(lambda: p.rollout(st.U)), st.U)
+    if X is None or not (np.all(np.isfinite(X)) and np.all(np.isfinite(U))):
         return st
     return Stages(p, X, U, st.mult, st.hom, st.eps_da)
+
+
+def _flown(fly):
+    """``fly()`` -- a float integration of the problem's flows -- or None where it does not
+    integrate (a near-collision: the integrator out of steps; 1 / 0 on Python floats)."""
+    try:
+        with np.errstate(invalid="ignore", over="ignore", divide="ignore"):
+            return fly()
+    except (DaddyError, ArithmeticError):
+        return None
 
 
 def ends_feasible(res, gmax: float, after_cut_off: bool, opts: SolverOptions) -> bool:
