@@ -77,7 +77,11 @@ class GuidanceSession:
         self.replans = 0
         self._withheld: list[float] = []   # estimate stamps whose thrust waits for a re-plan
         self._withheld_lock = threading.Lock()
-        self._unanswered: list[float] = []   # estimate stamps that came before any plan
+        # estimate stamps that came before any plan, or before the plan in force was published
+        self._unanswered: list[float] = []
+        # the plan last published (or in force when the session began): no thrust is
+        # commanded from a plan before it is published (``_unpublished``)
+        self._published: Plan | None = planner.plan
         self._cancel = (0, threading.Event())   # (solve number, its cancel flag)
         self.figures: dict = {}             # the running solve's progress (``ProgressLine``)
         self._replan_on_first_estimate = False
@@ -111,12 +115,32 @@ class GuidanceSession:
         """The thrust command of an accepted estimate: at once from the plan, or withheld for
         a re-plan (the plan does not fit it, or the re-plan policy wants one: _finish answers
         it)."""
+        if self._unpublished(plan, stamp):
+            return
         if self._fits(est, stamp, plan) and not self._self_triggered(est, stamp, plan):
             self.out.publish_thrust(plan.command_at(stamp, est.pos_m, est.vel_m_s), stamp)
 
+    def _unpublished(self, plan: Plan, stamp: float) -> bool:
+        """Whether ``plan`` is one the worker has stored but not yet published (a re-plan
+        between its solve and ``_finish``): the estimate is then answered by ``_finish`` after
+        the plan is published (``_answer_unanswered``), so a client holds the plan a thrust
+        command comes from before the command."""
+        with self._withheld_lock:
+            if plan is self._published:
+                return False
+            self._unanswered.append(stamp)
+            return True
+
+    def _publish(self, plan: Plan, stamp: float | None) -> None:
+        """Publish ``plan`` (schedule and path) and mark it as the plan commands may come
+        from."""
+        self.out.publish_plan(plan, stamp)
+        with self._withheld_lock:
+            self._published = plan
+
     def _answer_unanswered(self, plan: Plan) -> None:
-        """The estimates that came before any plan, answered by the one now in force (mass
-        and state may arrive in either order)."""
+        """The estimates that came before any plan (mass and state may arrive in either order)
+        or before the plan in force was published, answered by the one now in force."""
         with self._withheld_lock:
             stamps, self._unanswered = self._unanswered, []
         for s in stamps:
@@ -258,7 +282,7 @@ class GuidanceSession:
             return False
         self.trigger.replanned(stamp, est.pos_m, est.vel_m_s, mass)
         self.laws_served += 1
-        self.out.publish_plan(plan, None)
+        self._publish(plan, None)
         self.out.diag(Level.OK, Code.FEEDBACK_LAW,
                       f"stage {served.stage}: thrust from the plan's feedback law",
                       {"request_id": f"law-{stamp:.3f}", "stage": str(served.stage),
@@ -282,7 +306,7 @@ class GuidanceSession:
             self.out.diag(Level.ERROR, Code.PLAN_FILE_ERROR, f"persist_file not restored: {exc}",
                           {"field": "persist_file"}, None)
             return
-        self.out.publish_plan(plan, None)
+        self._publish(plan, None)
         self._replan_on_first_estimate = True
         self.out.diag(Level.WARN, Code.RESTORED,
                       f"restored the persisted plan (epoch {plan.epoch_s:.3f} s); re-planning "
@@ -312,7 +336,7 @@ class GuidanceSession:
                           stamp)
             self.plan_file = ""
             return None
-        self.out.publish_plan(plan, stamp)
+        self._publish(plan, stamp)
         self._persist()
         self.out.diag(Level.OK, Code.PLAN_ADOPTED, f"adopted nominal plan {Path(plan_file).name}",
                       {"request_id": "nominal"}, stamp)
@@ -321,7 +345,7 @@ class GuidanceSession:
     def adopt_plan(self, plan: Plan) -> None:
         """Make ``plan`` the current plan and publish it (e.g. a nominal computed elsewhere)."""
         self.planner.set_plan(plan)
-        self.out.publish_plan(plan, plan.epoch_s)
+        self._publish(plan, plan.epoch_s)
         self._persist()
         self.out.diag(Level.OK, Code.PLAN_ADOPTED, "adopted a plan",
                       {"request_id": plan.request_id or "adopted"}, plan.epoch_s)
@@ -397,7 +421,7 @@ class GuidanceSession:
                 extra=None) -> None:
         plan = self.planner.plan
         if plan is not None:
-            self.out.publish_plan(plan, stamp if out is not None and out.ok else None)
+            self._publish(plan, stamp if out is not None and out.ok else None)
         values = solve_values(request_id, self.planner.method, out, plan,
                               self.planner.units.lu_km, extra or {})
         self.out.diag(level, code, reason, values, stamp)

@@ -1,6 +1,7 @@
 """The guidance session's safety against bad stamps (issue 49, item 1), ROS-free: a glitch
 stamped far from the flight is rejected without touching the flight's clock, and a new clock
 is taken only from consistent estimates in a row (the node's graph: test_ros_node)."""
+import threading
 import time
 
 import numpy as np
@@ -262,4 +263,45 @@ def test_a_cold_re_plan_that_fails_falls_back_to_the_warm_start_and_its_plan_fit
         np.testing.assert_allclose(thrust, new.command_at(t, est.pos_m, est.vel_m_s))
         assert np.any(thrust != 0.0) or np.all(new.command_at(t, est.pos_m, est.vel_m_s) == 0.0)
     finally:
+        session.stop()
+
+
+def test_no_thrust_is_commanded_from_a_re_plan_before_it_is_published():
+    """A re-plan stores its plan before the worker publishes it; an estimate that arrives in
+    between (and fits the new plan) is answered only after the plan's publication, from it:
+    a client always holds the plan a thrust command comes from (the reliability campaign's
+    restart fault judged a command against the path received before it, and once found the
+    older plan's)."""
+    planner, session, out = _session()
+    log = []                                  # ("plan", plan) and ("thrust", stamp), in order
+    out.publish_plan = lambda plan, stamp: log.append(("plan", plan))
+    thrust = out.publish_thrust
+    out.publish_thrust = lambda u, s: (log.append(("thrust", s)), thrust(u, s))
+    stored, go = threading.Event(), threading.Event()
+    solve = planner.replan
+
+    def held_after_storing(*args, **kwargs):
+        r = solve(*args, **kwargs)            # the new plan is in force, not yet published
+        stored.set()
+        go.wait(60.0)
+        return r
+    planner.replan = held_after_storing
+    plan = planner.plan
+    try:
+        _, t = _send_off_plan(session, plan, 20000e3)          # a re-plan from it
+        assert stored.wait(120.0)
+        new = planner.plan
+        assert new is not plan
+        t2 = t + 0.3 * float(new.stage_dt_s[0])               # mid-stage: no stage re-plan
+        x = session.fit.predicted(new, t2)
+        session.on_mass(float(x[6]), t2)
+        session.on_state(OdometryState(x[:3], x[3:6], t2, "", None, None), t2)
+        assert ("thrust", t2) not in log                      # it waits for the publication
+        go.set()
+        assert _wait(lambda: ("thrust", t2) in log)
+        assert log.index(("plan", new)) < log.index(("thrust", t2))
+        (u,), = [[u for s, u in out.thrust if s == t2]]
+        np.testing.assert_allclose(u, new.command_at(t2, x[:3], x[3:6]))
+    finally:
+        go.set()
         session.stop()
