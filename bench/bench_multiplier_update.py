@@ -1,9 +1,12 @@
-"""The AUL's second-order multiplier update against eq. 9's first-order one (issue 46): each
-catalogue case solved cold with both, one process per solve, interleaved; AUL and DDP
-iterations, CPU seconds and the final mass (or cost) side by side.
+"""The AUL's multiplier updates side by side (issues 46, 47): eq. 9's first-order one against
+the second-order one, or the terminal multipliers swept with the controls (``--updates
+first_order sweep``); each catalogue case solved cold with each, one process per solve,
+interleaved; AUL and DDP iterations, CPU seconds and the final mass (or cost), and each CPU
+ratio to the first update's.
 
     OPENBLAS_NUM_THREADS=1 .venv/bin/python bench/bench_multiplier_update.py
         [--cases earth_mars halo_l2_l1] [--kinds energy fuel] [--cap 600]
+        [--updates first_order second_order]
 """
 from __future__ import annotations
 
@@ -47,21 +50,23 @@ def main() -> None:
                                                    "halo_l2_l1", "dro_dro", "lyapunov_l1_l2"])
     ap.add_argument("--kinds", nargs="*", default=["energy", "fuel"])
     ap.add_argument("--cap", type=float, default=600.0)
+    ap.add_argument("--updates", nargs="+", default=["first_order", "second_order"],
+                    choices=["first_order", "second_order", "sweep"])
     args = ap.parse_args()
     print(f"machine: {platform.processor() or platform.machine()}, one solve at a time")
     for case in args.cases:
         for kind in args.kinds:
             if kind == "fuel" and case == "double_integrator":
                 continue
-            first = run(case, kind, "first_order", args.cap)
-            second = run(case, kind, "second_order", args.cap)
+            runs = [run(case, kind, update, args.cap) for update in args.updates]
+            first = runs[0]
             value = "mass_kg" if first.get("mass_kg") is not None else "cost"
-            ratio = second["cpu_s"] / first["cpu_s"] if first["cpu_s"] else float("nan")
-            print(f"{case:18s} {kind:6s} first: AUL {first['aul']}, DDP {first['ddp']}, "
-                  f"{first['cpu_s']} s, {value} {first[value]}, converged {first['converged']} | "
-                  f"second: AUL {second['aul']}, DDP {second['ddp']}, {second['cpu_s']} s, "
-                  f"{value} {second[value]}, converged {second['converged']} | CPU ratio "
-                  f"{ratio:.2f}", flush=True)
+            cells = []
+            for update, r in zip(args.updates, runs):
+                ratio = r["cpu_s"] / first["cpu_s"] if first["cpu_s"] else float("nan")
+                cells.append(f"{update}: AUL {r['aul']}, DDP {r['ddp']}, {r['cpu_s']} s "
+                             f"({ratio:.2f}), {value} {r[value]}, converged {r['converged']}")
+            print(f"{case:18s} {kind:6s} " + " | ".join(cells), flush=True)
 
 
 if __name__ == "__main__":

@@ -6,6 +6,7 @@ rate, the distinct optima found and the solve times (the measurement of PDDP's T
     .venv/bin/python bench/bench_robustness.py CASE [--guesses 100] [--seed 0] [--cap 60]
                                                [--jobs 2] [--energy]
                                                [--globalization trust_region] [--peer]
+                                               [--multiplier-update sweep]
                                                [--r-min-km KM --reference-kg KG]
 
 Success: converged (feasible and KKT residual <= tol_optimality), max violation <= 1e-10, and
@@ -40,6 +41,7 @@ import numpy as np
 
 from daddy_core.catalogue import load_case, problem_from_case
 from daddy_core.solver import Globalization, case_options, solve
+from daddy_core.solver.options import MultiplierUpdate
 from daddy_core.solver.multistart import random_starts, value_of
 
 # the paper's final masses (kg, Dyn method: Table 6 Earth-Mars fuel, Table 9 CR3BP) and the
@@ -76,13 +78,14 @@ def _in_window(case_name: str, fuel: bool, value: float, is_mass: bool,
 
 def run_one(job) -> dict:
     """Solve one guess (a worker process)."""
-    case_name, fuel, U0, cap, globalization, peer, r_min_km, reference = job
+    case_name, fuel, U0, cap, globalization, update, peer, r_min_km, reference = job
     case = load_case(case_name)
     prob = problem_from_case(case, r_min_km=r_min_km)
     if peer:
         return run_peer(case, prob, U0, fuel, cap)
     opts = case_options(case, fuel, run=dict(time_budget_s=cap),
-                        ddp=dict(globalization=globalization))
+                        ddp=dict(globalization=globalization),
+                        aul=dict(multiplier_update=update))
     t0 = time.process_time()
     try:
         sol = solve(prob, U0, method="dyn", fuel_optimal=fuel, options=opts)
@@ -154,6 +157,8 @@ def main() -> int:
     ap.add_argument("--energy", action="store_true", help="energy-optimal (default: fuel)")
     ap.add_argument("--globalization", default="line_search",
                     choices=[g.value for g in Globalization])
+    ap.add_argument("--multiplier-update", default="first_order",
+                    choices=[m.value for m in MultiplierUpdate])
     ap.add_argument("--peer", action="store_true",
                     help="also solve every guess with the CasADi + IPOPT transcription")
     ap.add_argument("--r-min-km", type=float, default=None,
@@ -172,13 +177,14 @@ def main() -> int:
         ap.error("--peer has no keep-out constraint: drop --r-min-km")
     fuel = not args.energy and args.case != "double_integrator"
     U0s = guesses(args.case, args.guesses, args.seed)
-    solvers = [(f"daddy (dyn, {args.globalization})", False)]
+    solvers = [(f"daddy (dyn, {args.globalization}, {args.multiplier_update} multipliers)",
+                 False)]
     if args.peer:
         solvers.append(("CasADi + IPOPT", True))
     results = {}
     for label, peer in solvers:
-        jobs = [(args.case, fuel, U0, args.cap, args.globalization, peer, args.r_min_km,
-                 args.reference_kg) for U0 in U0s]
+        jobs = [(args.case, fuel, U0, args.cap, args.globalization, args.multiplier_update, peer,
+                 args.r_min_km, args.reference_kg) for U0 in U0s]
         wall = time.perf_counter()
         with concurrent.futures.ProcessPoolExecutor(max(1, args.jobs)) as pool:
             runs = list(pool.map(run_one, jobs))

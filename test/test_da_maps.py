@@ -95,3 +95,20 @@ def test_radius_higher_order_consistent_with_order2_rule():
     r = float(da.radius(p[None], 1e-8))
     # coefficients 2^i/i! decay like a geometric series beyond order 2; r must be finite > 0
     assert 0 < r < 1
+
+
+@pytest.mark.parametrize("k", [1, 3, 4, 5, 6])
+def test_shift_at_any_order_is_the_composition_with_the_shifted_identity(k):
+    """Taylor's shift (orders other than 2) gives the polynomial ``compose`` gives, for a batch
+    of maps with one displacement each and for one displacement for all."""
+    rng = np.random.default_rng(k)
+    x = da.variables(rng.normal(size=(4, 5)), order=k)
+    p = da.stack([da.sin(x[0]) * da.exp(x[1]) + x[3] ** 3, x[0] * x[2] / (2 + x[1] ** 2)])
+    for dv in (rng.normal(size=(4, 5)) * 0.3, rng.normal(size=4) * 0.3):
+        got = da.shift(p, dv)
+        want = da.compose(p, da.variables(dv, order=k, n=4))
+        np.testing.assert_allclose(got.c, want.c, rtol=1e-12, atol=1e-13 * np.abs(want.c).max())
+    # and re-centring back returns the polynomial (exact for a polynomial of degree <= k)
+    q = da.DA(rng.normal(size=(da.tables(3, k).size, 2)), da.tables(3, k))
+    dv = rng.normal(size=3)
+    np.testing.assert_allclose(da.shift(da.shift(q, dv), -dv).c, q.c, rtol=1e-10, atol=1e-10)

@@ -6,6 +6,7 @@ variables, for a batch of expansion points (e.g. one flow map per trajectory sta
 from __future__ import annotations
 
 import functools
+import math
 
 import numpy as np
 
@@ -150,27 +151,69 @@ def shift(p: DA, dv) -> DA:
 
     Order 2 (the solver's maps) in closed form: the value is p(dv), the gradient gains the
     quadratic terms' derivative at dv, the quadratic terms are unchanged -- the same truncated
-    polynomial as the general composition, for a few BLAS calls. Other orders compose.
+    polynomial as the general composition, for a few BLAS calls. Other orders by Taylor's
+    shift one variable at a time (``_taylor_shift``): the same polynomial as ``compose`` with
+    the shifted identity, without its products of polynomials.
     """
-    from .core import variables
     dv = np.asarray(dv, dtype=float)
-    if p.T.k != 2:
-        return compose(p, variables(dv, order=p.order, n=p.n))
     T, c = p.T, p.c
     if dv.shape[:1] != (T.n,):
         raise DaddyError(f"shift: displacement must have leading axis n={T.n}, got {dv.shape}")
-    if c.ndim == 3 and dv.ndim == 2 and c.shape[2] == dv.shape[1]:
+    if T.k == 2 and c.ndim == 3 and dv.ndim == 2 and c.shape[2] == dv.shape[1]:
         return DA(_shift_stages(c, dv, T), T)
     shape = np.broadcast_shapes(c.shape[1:], dv.shape[1:])
     c = np.broadcast_to(c, (T.size,) + shape)
     d = np.broadcast_to(dv.reshape(dv.shape[:1] + (1,) * (len(shape) - dv.ndim + 1)
                                    + dv.shape[1:]), (T.n,) + shape)
+    if T.k != 2:
+        return DA(_taylor_shift(c, d, T), T)
     n, q = T.n, c[T.block[2]]                                     # (n(n+1)/2, *shape)
     out = np.empty((T.size,) + shape)
     out[0] = evaluate(DA(c, T), d)
     out[1:n + 1] = _gradient_at(c, q, d[T.triu_i], d[T.triu_j], n)
     out[n + 1:] = q
     return DA(out, T)
+
+
+@functools.lru_cache(maxsize=None)
+def _variable_shifts(n: int, k: int) -> tuple:
+    """For each variable i, for j = 1..k: (target, source, weight) with monomial source =
+    target * x_i^j and weight = C(e_i(target) + j, j), over the targets of degree <= k - j --
+    the terms of p(.., x_i + a, ..) = sum_j weight * c[source] * a^j x^target."""
+    T = tables(n, k)
+    index = {tuple(e): m for m, e in enumerate(T.exponents.tolist())}
+    degree = T.exponents.sum(axis=1)
+    out = []
+    for i in range(n):
+        per_power = []
+        for j in range(1, k + 1):
+            target = np.flatnonzero(degree <= k - j)
+            e = T.exponents[target].copy()
+            e[:, i] += j
+            source = np.array([index[tuple(row)] for row in e.tolist()], dtype=np.int64)
+            weight = np.array([math.comb(int(b) + j, j) for b in T.exponents[target, i]],
+                              dtype=float)
+            per_power.append((target, source, weight))
+        out.append(tuple(per_power))
+    return tuple(out)
+
+
+def _taylor_shift(c: np.ndarray, d: np.ndarray, T: MonomialTables) -> np.ndarray:
+    """Coefficients (M, *shape) of p(d + x) from p's c (M, *shape), d (n, *shape): the shift
+    by one variable at a time, each a sum over the powers of its displacement (exact in
+    exact arithmetic; the truncation is p's own)."""
+    out = np.array(c, dtype=float)
+    extra = (1,) * (c.ndim - 1)
+    for i, per_power in enumerate(_variable_shifts(T.n, T.k)):
+        a = d[i]
+        if not np.any(a):
+            continue
+        prev, power = out, np.ones_like(a)
+        out = prev.copy()
+        for target, source, weight in per_power:
+            power = power * a
+            out[target] += prev[source] * weight.reshape((-1,) + extra) * power
+    return out
 
 
 def _gradient_at(c: np.ndarray, q: np.ndarray, di, dj, n: int) -> np.ndarray:

@@ -75,6 +75,7 @@ def aul(st: Stages, method: Method, opts: SolverOptions, stats: DDPStats,
         radius, rho_last, gains = res.radius, res.rho, res.gains or gains
         rho = res.rho if opts.ddp.carry_rho else rho0
         st = safe.without_drift(res.stages, opts, deadline) if method.dyn else res.stages
+        mult = st.mult   # (moved by the solve where the terminal multipliers are swept)
         g, ni, gt, nti = problem.constraint_values(st.X, st.U)
         gmax = largest(max_violation(g, ni), max_violation(gt, nti))
         if progress is not None:

@@ -63,7 +63,7 @@ def without_drift(st: Stages, opts: SolverOptions, deadline: Deadline | None) ->
     X, U = (res.X, res.U) if res.converged else (_flown(lambda: p.rollout(st.U)), st.U)
     if X is None or not (np.all(np.isfinite(X)) and np.all(np.isfinite(U))):
         return st
-    return Stages(p, X, U, st.mult, st.hom, st.eps_da)
+    return Stages(p, X, U, st.mult, st.hom, st.eps_da, order=st.order)
 
 
 def _flown(fly):

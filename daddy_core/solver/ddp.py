@@ -1,6 +1,7 @@
 """Differential dynamic programming with DA expansions: the loop of paper Alg. 3.
 
-Each iteration: a backward sweep on the expanded nominal (``sweeps``: Alg. 7 / 9 / 10), a step
+Each iteration: the terminal multipliers' step where they are swept (``multiplier_sweep``), a
+backward sweep on the expanded nominal (``sweeps``: Alg. 7 / 9 / 10), a step
 accepted by the globalisation (``globalization``: line search or trust region, per-stage trust
 where a few stages' cost models fail) on forward passes (Alg. 6 / 8), the new nominal's stage
 maps (one batched expansion, eq. 11 re-centring), and the stopping tests (``stopping``).
@@ -15,7 +16,8 @@ import numpy as np
 
 from .deadline import Deadline, passed
 from .globalization import Blame, StepControl
-from .options import Method, SolverOptions, Sweep
+from . import multiplier_sweep
+from .options import Method, MultiplierUpdate, SolverOptions, Sweep
 from .results import Status, StepResult
 from .stopping import CONVERGED, Stopping
 from .sweeps import Gains, Stages, Trial, backward_sweep, new_maps
@@ -101,6 +103,8 @@ def _iteration(cur: _Nominal, method: Method, ctl: StepControl, stop: Stopping,
     """One iteration of Alg. 3 on ``cur`` (updated in place): the status it ends the solve
     with, or None."""
     st = cur.st
+    if stop.opts.aul.multiplier_update is MultiplierUpdate.SWEEP:
+        st = cur.st = multiplier_sweep.swept(st, ctl.rho, stop.opts.aul.lambda_max)
     gains = _sweep(st, method.sweep, ctl.rho, stats, ctl.sweep_radius, ctl.trust_region)
     if gains is None:
         return ctl.indefinite()
@@ -136,6 +140,7 @@ def _accept(st: Stages, step: Trial, method: Method, stats: DDPStats) -> Stages:
     t0 = time.perf_counter()
     F = new_maps(st, step, method.dyn)
     walked = np.where(step.poly, st.walked + np.sqrt(np.sum(step.dz ** 2, axis=0)), 0.0)
-    new = Stages(p, step.X, step.U, st.mult, st.hom, st.eps_da, F=F, walked=walked)
+    new = Stages(p, step.X, step.U, st.mult, st.hom, st.eps_da, F=F, walked=walked,
+                 order=st.order)
     stats.expansion_s += time.perf_counter() - t0
     return new

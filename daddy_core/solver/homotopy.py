@@ -113,7 +113,8 @@ def continuation(problem: Problem, X, U, steps: tuple, method: Method, opts: Sol
                                   homotopy_steps=total))
         mult.mu[...] = opts.aul.mu_init
         mult.mu_t[...] = opts.aul.mu_init
-        st = (Stages(problem, X, U, mult, hom, opts.eps_da, F=F) if res is None
+        st = (Stages(problem, X, U, mult, hom, opts.eps_da, F=F, order=opts.ddp.map_order)
+              if res is None
               else res.stages.with_costs(mult, hom))
         res = aul(st, method, opts, stats, deadline, progress, rho0=rho)
         gains = res.gains or gains

@@ -7,6 +7,7 @@ import math
 from dataclasses import dataclass, fields, replace
 from enum import Enum
 
+from ..da.monomials import MAX_ORDER as MAX_MAP_ORDER
 from ..errors import DaddyError
 
 
@@ -61,12 +62,15 @@ class Globalization(Enum):
 
 
 class MultiplierUpdate(Enum):
-    """How the AUL moves its multipliers after each DDP solve: eq. 9's first-order step
+    """How the AUL moves its multipliers: after each DDP solve, eq. 9's first-order step
     lam + mu g, or the second-order one of HDDP and DA-HDDP (``multiplier_update``: the
-    multipliers of the KKT system of the Lagrangian's quadratic model at the DDP solution)."""
+    multipliers of the KKT system of the Lagrangian's quadratic model at the DDP solution); or
+    SWEEP: the terminal equalities' multipliers are variables of every DDP iteration's backward
+    sweep (HDDP; ``multiplier_sweep``), the other rows eq. 9."""
 
     FIRST_ORDER = "first_order"
     SECOND_ORDER = "second_order"
+    SWEEP = "sweep"
 
 
 def _check(group: object, prefix: str) -> None:
@@ -123,10 +127,14 @@ class DDPOptions(_Group):
     tr_ratio_tol: float = 0.1         # trust region: accepted when |actual / expected - 1| <= this
     tr_kappa: float = 0.25            # trust region: radius times 1 + kappa, or 1 - kappa
     carry_rho: bool = False           # each solve of an AUL loop resumes from the last one's rho
+    map_order: int = 2                # the stage maps' order, 2-6 (the Dyn pass evaluates them)
 
     def __post_init__(self):
         _check(self, "ddp")
         _positive(self, "ddp", "tol", "rho_max", "rho_factor")
+        if isinstance(self.map_order, bool) or self.map_order not in range(2, MAX_MAP_ORDER + 1):
+            raise DaddyError(f"options.ddp.map_order must be an integer in 2..{MAX_MAP_ORDER}, "
+                             f"got {self.map_order!r}")
         _fraction(self, "ddp", "ls_shrink", "tr_kappa")
         try:
             object.__setattr__(self, "globalization", Globalization(self.globalization))
@@ -148,7 +156,7 @@ class AULOptions(_Group):
     mu_growth: float = 10.0           # penalty growth per outer iteration
     stall_iter: int = 3               # solves at mu_max, violation not halved: stalled (0: off)
     tr_fallback: bool = True          # a line-search solve cut off is retried with the trust region
-    multiplier_update: MultiplierUpdate = MultiplierUpdate.FIRST_ORDER   # eq. 9, or second-order
+    multiplier_update: MultiplierUpdate = MultiplierUpdate.FIRST_ORDER   # eq. 9, second-order, sweep
 
     def __post_init__(self):
         _check(self, "aul")

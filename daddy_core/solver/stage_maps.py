@@ -1,5 +1,6 @@
-"""Order-2 stage maps and their re-centring (paper eq. 11), used by the Dyn forward pass
-(Alg. 8), Newton's constraint model and warm starts.
+"""Stage maps (order 2 by default, ``DDPOptions.map_order`` up to 6) and their re-centring
+(paper eq. 11), used by the Dyn forward pass (Alg. 8), Newton's constraint model and warm
+starts.
 
 All stages needing an expansion are expanded in one vectorised DA call (batch axis = stage). The
 DA variables of a stage are z = [dx (nx), du (nu)], n = nx + nu of them.
@@ -16,8 +17,8 @@ from ..problem import Problem
 
 
 def expand_dynamics(problem: Problem, X: np.ndarray, U: np.ndarray, stages=slice(None),
-                    values=None) -> da.DA:
-    """Order-2 stage maps at (X[k], U[k]) for the given stages, in one batched call.
+                    values=None, order: int = 2) -> da.DA:
+    """Stage maps of ``order`` (2-6) at (X[k], U[k]) for the given stages, in one batched call.
 
     Args:
         X: (B, nx) stage start states; U: (B, nu) controls; stages: which of the problem's
@@ -31,7 +32,7 @@ def expand_dynamics(problem: Problem, X: np.ndarray, U: np.ndarray, stages=slice
     """
     if X.shape[0] == 0:
         raise DaddyError("expand_dynamics needs at least one stage")
-    z = da.variables(np.concatenate([X.T, U.T]), order=2)
+    z = da.variables(np.concatenate([X.T, U.T]), order=order)
     x, u = z[:problem.nx], z[problem.nx:]
     dt, t0 = problem.stage_dt[stages], problem.stage_t0[stages]
     if values is None:
@@ -47,7 +48,7 @@ def maps_at(problem: Problem, F: da.DA, dz: np.ndarray, inside: np.ndarray, X: n
     one batched composition, the others re-expanded in one batched DA call.
 
     Args:
-        F: DA (nx, N) order-2 stage maps at the old nominal.
+        F: DA (nx, N) stage maps at the old nominal (the new ones have their order).
         dz: (n, N) deviations [dx; du] of the new nominal's stages from the old.
         inside: (N,) bool, stages to re-centre.
         X: (N+1, nx) or (N, nx) new stage start states; U: (N, nu) new controls.
@@ -57,7 +58,7 @@ def maps_at(problem: Problem, F: da.DA, dz: np.ndarray, inside: np.ndarray, X: n
         DA (nx, N) centred at (X[k], U[k]).
     """
     if not np.any(inside):
-        return expand_dynamics(problem, X[:problem.N], U, values=values)
+        return expand_dynamics(problem, X[:problem.N], U, values=values, order=F.order)
     if np.all(inside):   # (a warm re-plan's usual case: no copies of every map by index)
         return da.shift(F, dz)
     c = np.empty_like(F.c)
@@ -65,13 +66,14 @@ def maps_at(problem: Problem, F: da.DA, dz: np.ndarray, inside: np.ndarray, X: n
     c[..., idx_in] = da.shift(F[:, idx_in], dz[:, idx_in]).c
     if idx_out.size:
         c[..., idx_out] = expand_dynamics(problem, X[idx_out], U[idx_out], idx_out,
-                                          None if values is None else values[:, idx_out]).c
+                                          None if values is None else values[:, idx_out],
+                                          F.order).c
     return da.DA(c, F.T)
 
 
 @dataclass
 class StageMaps:
-    """Order-2 stage maps kept with the point they were expanded at, so that a nearby
+    """Stage maps kept with the point they were expanded at, so that a nearby
     trajectory can use them (paper eq. 11): a Dyn rollout, or re-centring instead of expanding.
 
     Attributes:

@@ -47,7 +47,8 @@ class Stages:
 
     Attributes:
         X: (N+1, nx), U: (N, nu) nominal.
-        F: DA (nx, N): second-order stage maps in z = [dx, du].
+        F: DA (nx, N): stage maps in z = [dx, du], of ``order`` (``DDPOptions.map_order``;
+            the sweeps read their first and second derivatives, the Dyn pass evaluates them).
         radius: (N,) convergence radii of F at accuracy eps_da.
         walked: (N,) how far each map has been re-centred since it was expanded (the sum of
             the Dyn pass's deviations |dz_k| over the steps it served the stage; 0 after an
@@ -60,14 +61,16 @@ class Stages:
     """
 
     def __init__(self, problem: Problem, X, U, mult: Multipliers, hom, eps_da: float, F=None,
-                 walked: np.ndarray | None = None):
+                 walked: np.ndarray | None = None, order: int = 2):
         self.problem = problem
         self.X = np.asarray(X, dtype=float)
         self.U = np.asarray(U, dtype=float)
         self.mult = mult
         self.hom = hom
         self.eps_da = eps_da
-        self.F = F if F is not None else expand_dynamics(problem, self.X[:-1], self.U)
+        if F is None or F.order != order:   # (maps of another order: expanded again)
+            F = expand_dynamics(problem, self.X[:-1], self.U, order=order)
+        self.F = F
         self.radius = da.radius(self.F, eps_da)
         self.walked = np.zeros(self.U.shape[0]) if walked is None else walked
         self._map_rows = None
@@ -86,7 +89,12 @@ class Stages:
     def with_costs(self, mult: Multipliers, hom) -> "Stages":
         """The same nominal and maps for other multipliers or another homotopy step."""
         return Stages(self.problem, self.X, self.U, mult, hom, self.eps_da, F=self.F,
-                      walked=self.walked)
+                      walked=self.walked, order=self.order)
+
+    @property
+    def order(self) -> int:
+        """The stage maps' order."""
+        return self.F.order
 
     def map_rows(self) -> np.ndarray:
         """(N, nx, M) the stage maps' coefficients, stage by stage contiguous: x_k+1 =
@@ -335,5 +343,5 @@ def new_maps(st: Stages, trial: Trial, dyn: bool) -> da.DA:
     the expansions' constant parts (not integrated twice)."""
     X, U = trial.X, trial.U
     if not dyn:
-        return expand_dynamics(st.problem, X[:-1], U, values=X[1:].T)
+        return expand_dynamics(st.problem, X[:-1], U, values=X[1:].T, order=st.order)
     return maps_at(st.problem, st.F, trial.dz, trial.poly, X, U, values=X[1:].T)
