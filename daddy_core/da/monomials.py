@@ -92,11 +92,11 @@ def tables(n: int, k: int) -> MonomialTables:
             parent_var[i] = m[-1]
     pi, pj, pt = [], [], []
     for i, a in enumerate(monos):
-        for j, b in enumerate(monos):
-            if len(a) + len(b) <= k:
-                pi.append(i)
-                pj.append(j)
-                pt.append(index[tuple(sorted(a + b))])
+        # (the monomials of degree <= k - deg a: the first blocks, in graded order)
+        for j, b in enumerate(monos[:blocks[k - len(a)].stop]):
+            pi.append(i)
+            pj.append(j)
+            pt.append(index[tuple(sorted(a + b))])
     order = np.argsort(pt, kind="stable")
     pair_i = np.asarray(pi)[order]
     pair_j = np.asarray(pj)[order]
