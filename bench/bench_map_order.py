@@ -9,37 +9,9 @@ CPU ratio to the first order's.
 from __future__ import annotations
 
 import argparse
-import json
-import os
 import platform
-import subprocess
-import sys
 
-SOLVE = """
-import json, sys, time
-from daddy_core.catalogue import load_case, problem_from_case
-from daddy_core.solver import case_options, solve
-case = load_case(sys.argv[1]); fuel = sys.argv[2] == "fuel"
-t = time.process_time()
-problem = problem_from_case(case)
-sol = solve(problem, case.cold_guess(problem.N), fuel_optimal=fuel,
-            options=case_options(case, fuel, run=dict(time_budget_s=float(sys.argv[4])),
-                                 ddp=dict(map_order=int(sys.argv[3]))))
-print(json.dumps({"cpu_s": round(time.process_time() - t, 2), "converged": sol.converged,
-                  "ddp": sol.iterations["ddp"], "share": sol.polynomial_share,
-                  "value": sol.final_mass_kg if sol.final_mass_kg is not None else sol.cost}))
-"""
-
-
-def run(case: str, fuel: bool, order: int, cap: float) -> dict:
-    env = dict(os.environ, OPENBLAS_NUM_THREADS="1")
-    try:
-        out = subprocess.run([sys.executable, "-c", SOLVE, case, "fuel" if fuel else "energy",
-                              str(order), str(cap)],
-                             env=env, capture_output=True, text=True, timeout=cap * 1.5 + 60)
-        return json.loads(out.stdout.strip().splitlines()[-1])
-    except (subprocess.TimeoutExpired, IndexError, json.JSONDecodeError):
-        return {"cpu_s": cap, "converged": False, "ddp": None, "share": None, "value": None}
+from bench_multiplier_update import run
 
 
 def main() -> None:
@@ -52,13 +24,14 @@ def main() -> None:
     args = ap.parse_args()
     print(f"machine: {platform.processor() or platform.machine()}, one solve at a time")
     for case in args.cases:
-        fuel = args.fuel and case != "double_integrator"
-        runs = [run(case, fuel, k, args.cap) for k in args.orders]
+        kind = "fuel" if args.fuel and case != "double_integrator" else "energy"
+        runs = [run(case, kind, {"ddp": {"map_order": k}}, args.cap) for k in args.orders]
         base = runs[0]["cpu_s"]
         cells = [f"order {k}: {r['cpu_s']} s ({r['cpu_s'] / base if base else float('nan'):.2f})"
-                 f", DDP {r['ddp']}, polynomial {r['share'] or 0:.0%}, {r['value']}, "
+                 f", DDP {r['ddp']}, polynomial {r['share'] or 0:.0%}, "
+                 f"{r['mass_kg'] if r['mass_kg'] is not None else r['cost']}, "
                  f"converged {r['converged']}" for k, r in zip(args.orders, runs)]
-        print(f"{case:18s} {'fuel' if fuel else 'energy':6s} " + " | ".join(cells), flush=True)
+        print(f"{case:18s} {kind:6s} " + " | ".join(cells), flush=True)
 
 
 if __name__ == "__main__":

@@ -26,22 +26,26 @@ t = time.process_time()
 problem = problem_from_case(case)
 sol = solve(problem, case.cold_guess(problem.N), fuel_optimal=fuel,
             options=case_options(case, fuel, run=dict(time_budget_s=float(sys.argv[4])),
-                                 aul=dict(multiplier_update=sys.argv[3])))
+                                 **json.loads(sys.argv[3])))
 print(json.dumps({"cpu_s": round(time.process_time() - t, 2), "converged": sol.converged,
                   "aul": sol.iterations["aul"], "ddp": sol.iterations["ddp"],
-                  "mass_kg": sol.final_mass_kg, "cost": sol.cost}))
+                  "share": sol.polynomial_share, "mass_kg": sol.final_mass_kg,
+                  "cost": sol.cost}))
 """
 
 
-def run(case: str, kind: str, update: str, cap: float) -> dict:
+def run(case: str, kind: str, changes: dict, cap: float) -> dict:
+    """One cold solve of ``case`` (``kind``: energy or fuel) in its own process, with the option
+    ``changes`` (``SolverOptions.with_``'s groups as dicts) and a time budget ``cap``."""
     env = dict(os.environ, OPENBLAS_NUM_THREADS="1")
     try:
-        out = subprocess.run([sys.executable, "-c", SOLVE, case, kind, update, str(cap)],
+        out = subprocess.run([sys.executable, "-c", SOLVE, case, kind, json.dumps(changes),
+                              str(cap)],
                              env=env, capture_output=True, text=True, timeout=cap * 1.5 + 60)
         return json.loads(out.stdout.strip().splitlines()[-1])
     except (subprocess.TimeoutExpired, IndexError, json.JSONDecodeError):
-        return {"cpu_s": cap, "converged": False, "aul": None, "ddp": None, "mass_kg": None,
-                "cost": None}
+        return {"cpu_s": cap, "converged": False, "aul": None, "ddp": None, "share": None,
+                "mass_kg": None, "cost": None}
 
 
 def main() -> None:
@@ -58,7 +62,8 @@ def main() -> None:
         for kind in args.kinds:
             if kind == "fuel" and case == "double_integrator":
                 continue
-            runs = [run(case, kind, update, args.cap) for update in args.updates]
+            runs = [run(case, kind, {"aul": {"multiplier_update": update}}, args.cap)
+                    for update in args.updates]
             first = runs[0]
             value = "mass_kg" if first.get("mass_kg") is not None else "cost"
             cells = []
