@@ -32,7 +32,7 @@ from dataclasses import dataclass, replace
 import numpy as np
 
 from .da import functions as dm
-from .da.calculus import derivative, invert, partial_evaluate
+from .da.calculus import SIX_DIGITS_CONDITION, derivative, invert, partial_evaluate
 from .da.core import DA, _wrap, variables
 from .da.maps import compose, evaluate
 from .da.monomials import MAX_ORDER, tables
@@ -43,7 +43,7 @@ from .throttle import throttle_thrust, thrust_of, throttle_form
 ACTIVE_TOL = 1e-7   # a stage or terminal inequality above -ACTIVE_TOL counts as active
 # a stage's systems are solved only where their linear part's condition number leaves the law
 # 6 significant digits (cond * eps <= 1e-6); beyond it the stage has no law (design notes)
-LAW_MAX_CONDITION = 1e-6 / np.finfo(float).eps
+LAW_MAX_CONDITION = SIX_DIGITS_CONDITION
 
 
 @dataclass(frozen=True)

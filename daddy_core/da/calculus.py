@@ -16,6 +16,12 @@ from .core import DA, _wrap
 from .maps import compose
 from .monomials import tables
 
+# the largest condition number a system is solved with where its answer needs 6 significant
+# digits (cond * eps <= 1e-6): the feedback laws' inversions (``policy.LAW_MAX_CONDITION``) and
+# the swept multipliers' step (``solver.multiplier_sweep``); docs/design-notes.md, "laws need
+# digits"
+SIX_DIGITS_CONDITION = 1e-6 / np.finfo(float).eps
+
 
 def derivative(p: DA, i: int) -> DA:
     """dp/dx_i, a polynomial of order k - 1 in the same algebra (its degree-k coefficients

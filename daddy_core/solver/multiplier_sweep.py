@@ -20,7 +20,8 @@ optimum, and DDP ends after one step (the DA-HDDP paper's LQ test, sec. IV.A).
 Only the terminal equalities are swept; path constraints and terminal inequalities keep the
 AUL's update (eq. 9). A sweep that cannot be formed (Q_uu not positive definite at the
 iteration's rho) or whose V_ll is not negative definite (the controls cannot move every
-terminal row) leaves the multipliers where they are.
+terminal row), or is too ill-conditioned for six digits (``da.calculus.SIX_DIGITS_CONDITION``, the
+feedback laws' rule), leaves the multipliers where they are.
 """
 from __future__ import annotations
 
@@ -30,11 +31,9 @@ import numpy as np
 
 from .. import da
 from ..errors import DaddyError
+from ..da.calculus import SIX_DIGITS_CONDITION
 from .linalg import regularised_inverse
 from .sweeps import Stages, _bordered
-
-# V_ll is used only when its condition number leaves the step 6 significant digits
-MAX_CONDITION = 1e-6 / np.finfo(float).eps
 
 
 def terminal_rows(st: Stages) -> tuple[np.ndarray, np.ndarray] | None:
@@ -93,7 +92,7 @@ def multiplier_step(st: Stages, rho: float) -> np.ndarray | None:
     if not (np.all(np.isfinite(V_ll)) and np.all(np.isfinite(V_l))):
         return None
     w = np.linalg.eigvalsh(V_ll)
-    if not (w[-1] < 0.0 and w[0] / w[-1] <= MAX_CONDITION):
+    if not (w[-1] < 0.0 and w[0] / w[-1] <= SIX_DIGITS_CONDITION):
         return None
     return -np.linalg.solve(V_ll, V_l)
 
