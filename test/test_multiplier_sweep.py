@@ -109,7 +109,7 @@ def test_a_nonlinear_optimum_is_the_same_with_swept_multipliers_or_third_order_m
     assert sol.max_violation < 1e-6
 
 
-@pytest.mark.parametrize("value", [1, 7, True, 2.5])
+@pytest.mark.parametrize("value", [1, 7, True, 2.5, 3.0, "3"])
 def test_a_map_order_outside_2_to_6_is_refused_by_name(value):
     with pytest.raises(DaddyError, match="options.ddp.map_order"):
         SolverOptions(ddp=dict(map_order=value))

@@ -4,6 +4,7 @@ re-plan preset (``SolverOptions.warm_replan``), and the method enum of paper Tab
 from __future__ import annotations
 
 import math
+import numbers
 from dataclasses import dataclass, fields, replace
 from enum import Enum
 
@@ -132,7 +133,8 @@ class DDPOptions(_Group):
     def __post_init__(self):
         _check(self, "ddp")
         _positive(self, "ddp", "tol", "rho_max", "rho_factor")
-        if isinstance(self.map_order, bool) or self.map_order not in range(2, MAX_MAP_ORDER + 1):
+        if (isinstance(self.map_order, bool) or not isinstance(self.map_order, numbers.Integral)
+                or self.map_order not in range(2, MAX_MAP_ORDER + 1)):
             raise DaddyError(f"options.ddp.map_order must be an integer in 2..{MAX_MAP_ORDER}, "
                              f"got {self.map_order!r}")
         _fraction(self, "ddp", "ls_shrink", "tr_kappa")
@@ -156,7 +158,7 @@ class AULOptions(_Group):
     mu_growth: float = 10.0           # penalty growth per outer iteration
     stall_iter: int = 3               # solves at mu_max, violation not halved: stalled (0: off)
     tr_fallback: bool = True          # a line-search solve cut off is retried with the trust region
-    multiplier_update: MultiplierUpdate = MultiplierUpdate.FIRST_ORDER   # eq. 9, second-order, sweep
+    multiplier_update: MultiplierUpdate = MultiplierUpdate.FIRST_ORDER   # eq. 9, 2nd order, sweep
 
     def __post_init__(self):
         _check(self, "aul")
