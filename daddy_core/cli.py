@@ -24,7 +24,7 @@ from .catalogue.sail_cases import (SAIL_METHOD, SailCase, SailGuess, sail_option
                                    write_sail_csv)
 from .catalogue.run_times import expected_run_time, measured_on, read_run_times
 from .pddp import Parametrisation, PDDPOptions
-from .solver import METHODS, Globalization, Solution, case_options, solve
+from .solver import METHODS, Globalization, MultiplierUpdate, Solution, case_options, solve
 
 
 def _parser() -> argparse.ArgumentParser:
@@ -67,6 +67,11 @@ def _parser() -> argparse.ArgumentParser:
     _output_arguments(s)
     s.add_argument("--globalization", choices=[g.value for g in Globalization],
                    help="DDP step control (default: the solver's)")
+    s.add_argument("--map-order", type=int, metavar="K",
+                   help="the stage maps' order, 2-6 (default 2): docs/policies.md")
+    s.add_argument("--multiplier-update", choices=[m.value for m in MultiplierUpdate],
+                   help="how the augmented Lagrangian moves its multipliers (default "
+                        "first_order; sweep: the terminal ones in every backward sweep)")
     s.add_argument("--time-budget", type=float, metavar="S", help="wall-clock budget in seconds")
     s.add_argument("--search-revolutions", type=float, metavar="SPAN",
                    help="Earth-centred cases: search the transfer's revolutions within SPAN "
@@ -212,9 +217,8 @@ def main(argv=None) -> int:
         problem = problem_from_case(case, stages=args.stages, r_min_km=args.r_min_km,
                                     tof_window=args.free_tof,
                                     revolutions_window=args.free_revolutions)
-        ddp = {} if args.globalization is None else {"globalization": args.globalization}
-        opts = case_options(case, fuel, run=dict(time_budget_s=args.time_budget), ddp=ddp,
-                            policy=dict(order=args.policy))
+        opts = case_options(case, fuel, run=dict(time_budget_s=args.time_budget),
+                            policy=dict(order=args.policy), **_solver_changes(args))
         if args.warm_start:
             u0 = Solution.from_json(args.warm_start).U
         else:
@@ -322,8 +326,9 @@ def _solve_costate(case, args) -> int:
     if refused:
         raise DaddyError(f"{', '.join(refused)}: not with --parametrisation costate (PDDP "
                          "solves the fuel-optimal transfer over costates, hessdyn)")
-    if args.time_budget or args.globalization:
-        raise DaddyError("--time-budget, --globalization: not with --parametrisation costate")
+    if args.time_budget or _solver_changes(args):
+        raise DaddyError("--time-budget, --globalization, --map-order, --multiplier-update: not "
+                         "with --parametrisation costate")
     progress = None if args.quiet else (lambda line: print(line, flush=True))
     opts = PDDPOptions(stages=args.costate_stages, sharpness=tuple(args.sharpness))
     r = solve_pddp(case, options=opts, progress=progress)
@@ -369,8 +374,7 @@ def _solve_sail(case: SailCase, args) -> int:
         raise DaddyError(f"{', '.join(refused)}: not for a solar-sail case ({case.name!r} "
                          "maximises its semi-major axis from --guess; its revolutions are in the "
                          "case file)")
-    ddp = {} if args.globalization is None else {"globalization": args.globalization}
-    opts = sail_options(run=dict(time_budget_s=args.time_budget), ddp=ddp)
+    opts = sail_options(run=dict(time_budget_s=args.time_budget), **_solver_changes(args))
     progress = None if args.quiet else (lambda line: print(line, flush=True))
     result = solve_sail(case, SailGuess(args.guess or SailGuess.STEERING_LAW.value), opts,
                         progress, args.method or SAIL_METHOD)
@@ -401,6 +405,15 @@ def _solve_sail(case: SailCase, args) -> int:
     return 0
 
 
+def _solver_changes(args) -> dict:
+    """The option groups the command line changes (``SolverOptions.with_``'s dicts): DDP's
+    globalisation and map order, the AUL's multiplier update; {} when none is given."""
+    ddp = {k: v for k, v in (("globalization", args.globalization),
+                             ("map_order", args.map_order)) if v is not None}
+    aul = {} if args.multiplier_update is None else {"multiplier_update": args.multiplier_update}
+    return {k: v for k, v in (("ddp", ddp), ("aul", aul)) if v}
+
+
 def _case_epoch(case: SailCase) -> datetime:
     """The case's start as a UTC date-time (the OEM's default start)."""
     return trajectory_output.J2000 + timedelta(seconds=case.epoch_s)
@@ -408,11 +421,12 @@ def _case_epoch(case: SailCase) -> datetime:
 
 def _search(case, fuel: bool, args) -> RevolutionSearch:
     """``--search-revolutions``: the search, its trials printed as they are solved."""
-    if args.stages or args.warm_start or args.time_budget or args.globalization or \
+    if args.stages or args.warm_start or args.time_budget or _solver_changes(args) or \
             args.no_polish or args.r_min_km:
         raise DaddyError("--search-revolutions solves from the case's cold guess with its own "
                          "stages and the default options: drop --stages, --warm-start, "
-                         "--time-budget, --globalization, --no-polish and --r-min-km")
+                         "--time-budget, --globalization, --map-order, --multiplier-update, "
+                         "--no-polish and --r-min-km")
     span = args.search_revolutions
     tol = args.search_tol or span / 20.0
     if not (span > 0 and tol > 0):

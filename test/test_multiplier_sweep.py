@@ -11,7 +11,7 @@ import pytest
 from daddy_core.da import functions as dm
 from daddy_core.errors import DaddyError
 from daddy_core.problem import Problem
-from daddy_core.solver import SolverOptions, solve
+from daddy_core.solver import Solution, SolverOptions, solve
 from daddy_core.solver.ddp import DDPStats, ddp
 from daddy_core.solver.lagrangian import Multipliers
 from daddy_core.solver.options import Method, MultiplierUpdate
@@ -113,3 +113,21 @@ def test_a_nonlinear_optimum_is_the_same_with_swept_multipliers_or_third_order_m
 def test_a_map_order_outside_2_to_6_is_refused_by_name(value):
     with pytest.raises(DaddyError, match="options.ddp.map_order"):
         SolverOptions(ddp=dict(map_order=value))
+
+
+def test_daddy_solve_takes_the_map_order_and_the_multiplier_update(tmp_path, capsys):
+    """The command line's --map-order and --multiplier-update reach the solver (the double
+    integrator's terminal rows swept: one AUL solve, where eq. 9 takes several), and are
+    refused by name where they do not apply."""
+    from daddy_core.cli import main
+    path = tmp_path / "di.json"
+    assert main(["solve", "double_integrator", "--map-order", "3", "--multiplier-update",
+                 "sweep", "--quiet", "--json", str(path)]) == 0
+    sol = Solution.from_json(path)
+    assert sol.converged and sol.iterations["aul"] == 1
+    assert sol.cost == pytest.approx(1.1272727272727, rel=1e-10)   # the closed-form cost
+    assert main(["solve", "double_integrator", "--map-order", "7", "--quiet"]) == 2
+    assert "options.ddp.map_order" in capsys.readouterr().err
+    assert main(["solve", "dro_dro", "--parametrisation", "costate", "--multiplier-update",
+                 "sweep", "--quiet"]) == 2
+    assert "--multiplier-update" in capsys.readouterr().err

@@ -425,5 +425,5 @@ def case_options(case, fuel_optimal: bool, **changes) -> SolverOptions:
 
 
 __all__ = ["AULOptions", "DDPOptions", "EndGameOptions", "GROUPS", "Globalization", "KKTOptions",
-           "METHODS", "Method", "NewtonOptions", "RunOptions", "SolverOptions", "StartOptions",
-           "Sweep", "case_options"]
+           "METHODS", "Method", "MultiplierUpdate", "NewtonOptions", "RunOptions", "SolverOptions",
+           "StartOptions", "Sweep", "case_options"]
