@@ -17,6 +17,8 @@ import platform
 import subprocess
 import sys
 
+from daddy_core.solver import MultiplierUpdate
+
 SOLVE = """
 import json, sys, time
 from daddy_core.catalogue import load_case, problem_from_case
@@ -55,7 +57,7 @@ def main() -> None:
     ap.add_argument("--kinds", nargs="*", default=["energy", "fuel"])
     ap.add_argument("--cap", type=float, default=600.0)
     ap.add_argument("--updates", nargs="+", default=["first_order", "second_order"],
-                    choices=["first_order", "second_order", "sweep"])
+                    choices=[m.value for m in MultiplierUpdate])
     args = ap.parse_args()
     print(f"machine: {platform.processor() or platform.machine()}, one solve at a time")
     for case in args.cases:

@@ -40,8 +40,7 @@ import time
 import numpy as np
 
 from daddy_core.catalogue import load_case, problem_from_case
-from daddy_core.solver import Globalization, case_options, solve
-from daddy_core.solver.options import MultiplierUpdate
+from daddy_core.solver import Globalization, MultiplierUpdate, case_options, solve
 from daddy_core.solver.multistart import random_starts, value_of
 
 # the paper's final masses (kg, Dyn method: Table 6 Earth-Mars fuel, Table 9 CR3BP) and the

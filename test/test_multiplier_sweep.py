@@ -35,16 +35,18 @@ def _lq() -> Problem:
                    g_teq=lambda x, xt: dm.stack([x[i] - xt[i] for i in range(6)]))
 
 
-def _lq_optimum() -> tuple[np.ndarray, float]:
+def _lq_optimum() -> tuple[np.ndarray, float, np.ndarray]:
     """min |u|^2 subject to x_N = x_t, by numpy: x_N = A^N x0 + sum_k A^(N-1-k) B u_k = M u + c,
-    u* = M^T (M M^T)^-1 (x_t - c)."""
+    u* = M^T (M M^T)^-1 (x_t - c). Returns u* (N, 3), J* and the multipliers of
+    J + lam^T (x_N - x_t), lam* = -2 (M M^T)^-1 (x_t - c)."""
     A = np.eye(6)
     A[:3, 3:] = np.eye(3)
     B = np.vstack([np.zeros((3, 3)), np.eye(3)])
     M = np.hstack([np.linalg.matrix_power(A, N - 1 - k) @ B for k in range(N)])
     c = np.linalg.matrix_power(A, N) @ X0
-    u = M.T @ np.linalg.solve(M @ M.T, TARGET - c)
-    return u.reshape(N, 3), float(u @ u)
+    y = np.linalg.solve(M @ M.T, TARGET - c)
+    u = M.T @ y
+    return u.reshape(N, 3), float(u @ u), -2.0 * y
 
 
 def _one_iteration(problem, update: MultiplierUpdate, order: int,
@@ -62,7 +64,7 @@ def _one_iteration(problem, update: MultiplierUpdate, order: int,
 @pytest.mark.parametrize("order", [2, 3, 4, 5, 6])
 def test_the_lq_problem_is_solved_by_one_iteration_at_every_map_order(order, method):
     problem = _lq()
-    U_star, J_star = _lq_optimum()
+    U_star, J_star, _ = _lq_optimum()
     st = _one_iteration(problem, MultiplierUpdate.SWEEP, order, method)
     assert st.order == order
     np.testing.assert_allclose(st.U, U_star, atol=1e-10)
@@ -83,18 +85,9 @@ def test_a_solve_with_swept_multipliers_ends_in_one_aul_iteration_on_the_lq():
                 options=SolverOptions(aul=dict(multiplier_update="sweep")))
     assert sol.converged
     assert sol.iterations["aul"] == 1
-    np.testing.assert_allclose(sol.U, _lq_optimum()[0], atol=1e-9)
-    np.testing.assert_allclose(sol.duals["lam_t"], -2 * np.linalg.solve(
-        *_normal_equations()), rtol=1e-8, atol=1e-10)
-
-
-def _normal_equations():
-    """(M M^T, x_t - c): the multipliers of J + lam^T (x_N - x_t) are -2 (M M^T)^-1 (x_t - c)."""
-    A = np.eye(6)
-    A[:3, 3:] = np.eye(3)
-    B = np.vstack([np.zeros((3, 3)), np.eye(3)])
-    M = np.hstack([np.linalg.matrix_power(A, N - 1 - k) @ B for k in range(N)])
-    return M @ M.T, TARGET - np.linalg.matrix_power(A, N) @ X0
+    U_star, _, lam_star = _lq_optimum()
+    np.testing.assert_allclose(sol.U, U_star, atol=1e-9)
+    np.testing.assert_allclose(sol.duals["lam_t"], lam_star, rtol=1e-8, atol=1e-10)
 
 
 @pytest.mark.parametrize("update, order", [("sweep", 2), ("first_order", 3)])
