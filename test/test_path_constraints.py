@@ -13,7 +13,7 @@ from daddy_core.catalogue import load_case, problem_from_case
 from daddy_core.catalogue.rendezvous import cw_rendezvous
 from daddy_core.da import functions as dm
 from daddy_core.errors import DaddyError
-from daddy_core.path_constraints import dense_margin
+from daddy_core.path_constraints import PathMargin, dense_margin, tightened
 from daddy_core.solver import Solution, SolverOptions, case_options, solve
 from daddy_ros.assessment import assess
 from daddy_ros.config import PLANS_DIR
@@ -103,6 +103,31 @@ def test_node_wise_constraint_dips_between_nodes(node_wise):
     assert dip > 10.0                                       # km inside the keep-out
     assert moon_distance_km(problem, sol.X, sol.U) == pytest.approx(25_000.0 - dip, abs=1e-3)
     assert [r["label"] for r in sol.violations if r["name"] == "g_path[0]"] == ["keep-out"]
+
+
+def test_the_exchange_tightens_the_stage_whose_samples_hold_the_worst_point():
+    """``tightened``: a stage whose dense maximum lies between its samples is tightened by 1.25
+    times its excess (or its old offset plus 1.25 times the violation); one whose maximum is
+    its start node -- the previous stage's last sample -- leaves its own samples alone and
+    tightens the previous stage by 1.25 times the violation. (Before, the keep-out rendezvous's
+    stage 20 held its samples 5.3e-3 inside for a 6.9e-10 violation at its start node: the
+    answer's propellant 1.25740 instead of 1.25702.)"""
+    worst = np.array([[-1.0, -1.0, 6.6e-4, 6.9e-10, -1.0]])
+    excess = np.array([[0.0, 0.0, 6.6e-4, 5.3e-3, 0.0]])
+    where = np.array([[0.5, 0.5, 0.875, 0.0, 0.5]])
+    pm = PathMargin(-6.6e-4, 2, 0.875, excess, worst, where)
+    offset = tightened(None, pm, 1e-10)
+    np.testing.assert_allclose(offset, [[0.0, 0.0, 1.25 * 6.6e-4, 0.0, 0.0]])
+    start = np.array([[0.0, 0.0, 1e-3, 0.0, 0.0]])      # an earlier round's offsets grow
+    np.testing.assert_allclose(tightened(start, pm, 1e-10),
+                               [[0.0, 0.0, 1e-3 + 1.25 * 6.6e-4, 0.0, 0.0]])
+    node = replace(pm, worst=np.array([[-1.0, -1.0, -1.0, 6.9e-10, -1.0]]))
+    np.testing.assert_allclose(tightened(None, node, 1e-10),
+                               [[0.0, 0.0, 1.25 * 6.9e-10, 0.0, 0.0]], rtol=1e-12, atol=0)
+    first = PathMargin(-1e-9, 0, 0.0, np.array([[5e-3, 0.0]]), np.array([[1e-9, -1.0]]),
+                       np.array([[0.0, 0.5]]))           # stage 0's start is x0: no stage before
+    np.testing.assert_allclose(tightened(None, first, 1e-10), [[1.25 * 5e-3, 0.0]])
+    assert tightened(None, replace(pm, worst=np.minimum(worst, 0.0)), 1e-10) is None
 
 
 def test_keep_out_around_the_start_is_infeasible_and_says_so_at_once():

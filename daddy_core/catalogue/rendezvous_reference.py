@@ -26,11 +26,13 @@ def _stage_matrices(h: float, steps: int) -> tuple[np.ndarray, np.ndarray]:
     return S[:6, :6], S[:6, 6:]
 
 
-def slsqp_reference(problem, keep_out_km: float | None, samples: int = 8
+def slsqp_reference(problem, keep_out_km: float | None, samples: int = 8,
+                    start: np.ndarray | None = None
                     ) -> tuple[float, float | None, np.ndarray | None]:
     """SLSQP's propellant optimum of the rendezvous ``problem`` (``cw_rendezvous``) without and
     with a keep-out sphere of ``keep_out_km`` held at ``samples`` points per stage (free
-    first, then the keep-out from the free optimum): (free propellant, kept propellant,
+    first, then the keep-out from the free optimum, or from the controls ``start`` (N, 3) when
+    given): (free propellant, kept propellant,
     kept U (N, 3); None, None without a keep-out); propellant: ``rendezvous.propellant``.
     Raises RuntimeError when SLSQP fails."""
     N, dt = problem.N, float(problem.stage_dt[0])
@@ -99,5 +101,5 @@ def slsqp_reference(problem, keep_out_km: float | None, samples: int = 8
     free = run(np.full((N, 3), 0.01), False)
     if keep_out_km is None:
         return propellant(free, problem.stage_dt), None, None
-    kept = run(free, True)
+    kept = run(free if start is None else np.asarray(start, float), True)
     return propellant(free, problem.stage_dt), propellant(kept, problem.stage_dt), kept
