@@ -200,7 +200,7 @@ def tightened(offset: np.ndarray | None, pm: PathMargin, tol: float) -> np.ndarr
     previous stage's last sample, so the previous stage's offset grows by 1.25 times the
     violation (what is left there is the difference between the stage's flow and its samples'
     sub-steps, ~1e-9). Tightening the stage itself by its excess held all its samples far
-    inside for nothing (the keep-out rendezvous: 5.3e-3 for a 6.9e-10 violation)."""
+    inside for nothing (the keep-out rendezvous: 5.3 m for 6.9e-10 km)."""
     over = pm.worst > tol
     if not np.any(over):
         return None
