@@ -61,10 +61,10 @@ def test_a_kkt_steps_restoration_runs_while_newton_converges_fast_and_no_longer(
     kkt.restore_iter iterations and stops once its residual has not halved over
     kkt.restore_stall_iter of them (Newton converges fast or not at all: design notes,
     restoration stall); with them the exact end game still lands on the transcription's
-    603.5498 kg, feasible and KKT-converged. (Whether a restoration stalls depends on the
-    steps: since a step keeps the inequalities it would cross, none does here.)"""
+    603.5498 kg, feasible and KKT-converged."""
     from daddy_core.solver import kkt_polish as kp
     from daddy_core.solver.options import KKTOptions
+    from daddy_core.solver.results import Status
     seen, real = [], kp.polish
 
     def spy(problem, X, U, opts, deadline=None, maps=None):
@@ -82,6 +82,7 @@ def test_a_kkt_steps_restoration_runs_while_newton_converges_fast_and_no_longer(
     assert kkt.restore_stall_iter < kkt.restore_iter
     assert seen and all((m, st) == (kkt.restore_iter, kkt.restore_stall_iter)
                         for m, st, _ in seen)
+    assert any(r.status is Status.NEWTON_STALLED for _, _, r in seen)   # the rule acted
 
 
 def test_a_kkt_step_that_cannot_be_flown_refuses_its_shift_not_the_polishing(monkeypatch):
@@ -109,26 +110,6 @@ def test_a_kkt_step_that_cannot_be_flown_refuses_its_shift_not_the_polishing(mon
     assert res.iterations >= 1 and prob.violation(res.X, res.U) <= 1e-10
     assert objective(prob, res.X, res.U, HOM) < objective(prob, X2, U2, HOM)
     assert res.optimality.kkt_residual < start.kkt_residual
-
-
-def test_a_kkt_step_holds_the_inequalities_it_would_cross():
-    """The working-set QP step of a KKT iteration keeps the linearisation of every inequality:
-    one off the working set that the step would cross joins it (a blocking constraint), as one
-    whose multiplier turns negative leaves it. min (y0 - 1)^2 / 2 + y1^2 / 2 with y0 <= 0.5
-    (inactive at y = 0) and y0 + y1 = 0.2 (an equality): the unconstrained step crosses the
-    bound; the QP's answer sits on it, y = (0.5, -0.3), with the bound's multiplier 0.2 > 0.
-    Before, the step crossed it to y0 = 0.6 and left the restoration to mend a first-order
-    violation (the keep-out rendezvous's exact fuel polishing stalled at residual 3.4e-3)."""
-    import scipy.sparse as sp
-    from daddy_core.solver.kkt_polish import kkt_step
-    H = sp.identity(2, format="csr")
-    c = np.array([-1.0, 0.0])                     # the cost gradient at y = 0
-    D = sp.csr_matrix(np.array([[1.0, 0.0], [1.0, 1.0]]))
-    g = np.array([-0.5, -0.2])                    # y0 - 0.5 <= 0; y0 + y1 - 0.2 = 0
-    ineq = np.array([True, False])
-    dY, mu = kkt_step(H, 0.0, D, c, g, ineq, work=~ineq)
-    np.testing.assert_allclose(dY, [0.5, -0.3], atol=1e-12)
-    assert mu[0] == pytest.approx(0.2) and mu[1] == pytest.approx(0.3)
 
 
 def test_infinite_tolerance_neither_evaluates_nor_polishes():

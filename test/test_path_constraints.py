@@ -111,7 +111,7 @@ def test_the_exchange_tightens_the_stage_whose_samples_hold_the_worst_point():
     its start node -- the previous stage's last sample -- leaves its own samples alone and
     tightens the previous stage by 1.25 times the violation. (Before, the keep-out rendezvous's
     stage 20 held its samples 5.3 m inside for a 6.9e-10 km violation at its start node: the
-    answer's propellant 1.25740 instead of 1.25702.)"""
+    swept solve's propellant 1.25770 instead of 1.25732.)"""
     worst = np.array([[-1.0, -1.0, 6.6e-4, 6.9e-10, -1.0]])
     excess = np.array([[0.0, 0.0, 6.6e-4, 5.3e-3, 0.0]])
     where = np.array([[0.5, 0.5, 0.875, 0.0, 0.5]])

@@ -19,9 +19,7 @@ convergence linear):
         [H + delta I   A_W^T] [dY]   [-c  ]
         [A_W           0    ] [mu] = [-g_W],
     an inequality of W whose new multiplier is negative leaves W (it wants to leave its
-    bound), one off W whose linearisation the step crosses joins it (a blocking constraint:
-    its violation would be first order in the step, beyond what the restoration mends), and
-    the system is solved again (bounded passes);
+    bound) and the system is solved again (bounded passes);
   - Levenberg-Marquardt-like shifts delta (``_SHIFTS``, relative to H's largest diagonal
     entry): from the level the last iteration ended on, a shift is refused when the KKT
     system is singular, the model predicts no decrease, or the cost at Y + dY misses its own
@@ -52,7 +50,7 @@ from .stage_maps import StageMaps
 
 # Hessian shifts (relative to its largest diagonal entry): Levenberg-Marquardt-like levels
 _SHIFTS = (0.0,) + tuple(10.0 ** k for k in range(-10, 3))
-_MAX_DROPS = 5                     # passes that drop or add inequalities (negative / blocking)
+_MAX_DROPS = 5                     # passes that drop inequalities with negative multipliers
 _SOLVE_TOL = 1e-8                  # largest relative residual of a KKT solve taken as solved
 
 
@@ -251,11 +249,9 @@ def kkt_step(H: sp.csr_matrix, shift: float, D: sp.csr_matrix, c: np.ndarray, g:
         mu = np.zeros(work.shape)
         mu[work] = sol[n:]
         leaving = ineq & work & (mu < 0)
-        # inequalities off the working set whose linearisation the step crosses (blocking)
-        blocking = ineq & ~work & (g + D @ sol[:n] > 0)
-        if not (leaving.any() or blocking.any()):
+        if not leaving.any():
             break
-        work = (work & ~leaving) | blocking
+        work &= ~leaving
     return sol[:n], mu
 
 
