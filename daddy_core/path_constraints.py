@@ -113,21 +113,34 @@ class PathMargin:
     """The path constraint along a re-propagated trajectory (``dense_margin``).
 
     Attributes:
-        margin: -max over every stage, instant and component of g_path: the true minimum
-            margin (>= 0: the constraint holds everywhere; in g_path's units).
-        stage, tau: where the margin is smallest (stage index, fraction of the stage).
         excess: (n_p, N) each stage's dense maximum of each component minus the largest of
             its sampled values: how far the constraint rises between the samples.
         worst: (n_p, N) each stage's dense maximum of each component.
         where: (n_p, N) the fraction of the stage where it lies (0: the stage's start node).
+        margin (property): -max over every stage, instant and component of g_path: the true
+            minimum margin (>= 0: the constraint holds everywhere; in g_path's units).
+        stage, tau (properties): where the margin is smallest (stage index, fraction of it).
     """
 
-    margin: float
-    stage: int
-    tau: float
     excess: np.ndarray
     worst: np.ndarray
     where: np.ndarray
+
+    @property
+    def _smallest(self) -> tuple[int, int]:
+        return np.unravel_index(int(np.argmax(self.worst)), self.worst.shape)
+
+    @property
+    def margin(self) -> float:
+        return float(-self.worst[self._smallest])
+
+    @property
+    def stage(self) -> int:
+        return int(self._smallest[1])
+
+    @property
+    def tau(self) -> float:
+        return float(self.where[self._smallest])
 
 
 def _states_at(problem, X: np.ndarray, U: np.ndarray, tau: np.ndarray) -> np.ndarray:
@@ -176,9 +189,7 @@ def dense_margin(problem, X: np.ndarray, U: np.ndarray) -> PathMargin:
         better = top > worst[i]
         worst[i] = np.where(better, top, worst[i])
         where[i] = np.where(better, mid, where[i])
-    i, k = np.unravel_index(int(np.argmax(worst)), worst.shape)
-    return PathMargin(float(-worst[i, k]), int(k), float(where[i, k]),
-                      worst - samples.max(axis=0), worst, where)
+    return PathMargin(worst - samples.max(axis=0), worst, where)
 
 
 def tightened(offset: np.ndarray | None, pm: PathMargin, tol: float) -> np.ndarray | None:

@@ -115,7 +115,7 @@ def test_the_exchange_tightens_the_stage_whose_samples_hold_the_worst_point():
     worst = np.array([[-1.0, -1.0, 6.6e-4, 6.9e-10, -1.0]])
     excess = np.array([[0.0, 0.0, 6.6e-4, 5.3e-3, 0.0]])
     where = np.array([[0.5, 0.5, 0.875, 0.0, 0.5]])
-    pm = PathMargin(-6.6e-4, 2, 0.875, excess, worst, where)
+    pm = PathMargin(excess, worst, where)
     offset = tightened(None, pm, 1e-10)
     np.testing.assert_allclose(offset, [[0.0, 0.0, 1.25 * 6.6e-4, 0.0, 0.0]])
     start = np.array([[0.0, 0.0, 1e-3, 0.0, 0.0]])      # an earlier round's offsets grow
@@ -124,7 +124,7 @@ def test_the_exchange_tightens_the_stage_whose_samples_hold_the_worst_point():
     node = replace(pm, worst=np.array([[-1.0, -1.0, -1.0, 6.9e-10, -1.0]]))
     np.testing.assert_allclose(tightened(None, node, 1e-10),
                                [[0.0, 0.0, 1.25 * 6.9e-10, 0.0, 0.0]], rtol=1e-12, atol=0)
-    first = PathMargin(-1e-9, 0, 0.0, np.array([[5e-3, 0.0]]), np.array([[1e-9, -1.0]]),
+    first = PathMargin(np.array([[5e-3, 0.0]]), np.array([[1e-9, -1.0]]),
                        np.array([[0.0, 0.5]]))           # stage 0's start is x0: no stage before
     np.testing.assert_allclose(tightened(None, first, 1e-10), [[1.25 * 5e-3, 0.0]])
     assert tightened(None, replace(pm, worst=np.minimum(worst, 0.0)), 1e-10) is None
