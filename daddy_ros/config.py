@@ -59,7 +59,7 @@ class PlannerConfig:
                                        "DDP, so a re-optimisation stopped by its budget still "
                                        "yields a feasible plan (and re-plans are faster)",
                                        runtime=True)
-    arrival_tolerance_m: float = option(0.0, "in the arrival phase (the last re-gridded stages) "
+    arrival_tolerance_m: float = option(0.0, "in the arrival phase (the last stages, split) "
                                              "the terminal position may be this far from the "
                                              "target, the velocity stays exact [m]; 0: position "
                                              "exact too", bounds=(0.0, 1e9), runtime=True)

@@ -86,6 +86,8 @@ class Plan:
             margin ladder, see ``replan_policy``).
         thrust_rtn: the thrust is in the radial / transverse / normal axes of the osculating
             orbit (Earth-centred scenarios), not in the scenario's frame.
+        arrival: solved as the arrival phase (``shift``): its stages split, its terminal
+            position within the arrival tolerance; every re-plan of it is one too.
     """
 
     epoch_s: float
@@ -99,10 +101,12 @@ class Plan:
     max_violation: float = 0.0
     thrust_bound_n: float = 0.0
     thrust_rtn: bool = False
+    arrival: bool = False
 
     @classmethod
     def of(cls, sol: Solution, X: np.ndarray, epoch_s: float, units: Units, thrust_bound: float,
-           request_id: str = "", solve_time_s: float = 0.0, warm_start: bool = False) -> "Plan":
+           request_id: str = "", solve_time_s: float = 0.0, warm_start: bool = False,
+           arrival: bool = False) -> "Plan":
         """The plan flying ``sol``'s controls from ``epoch_s``, predicted states X (normalised)
         and thrust bound (normalised). A solution staged in true longitude (Earth-centred)
         gives its stage durations from its time states and its states in Cartesian
@@ -114,7 +118,8 @@ class Plan:
         else:
             dt_s, states = sol.stage_dt * units.tu_s, units.states_si(X)
         return cls(epoch_s, dt_s, sol.thrust_n.copy(), states, sol, request_id, solve_time_s,
-                   warm_start, sol.max_violation, float(units.thrust_n(thrust_bound)), rtn)
+                   warm_start, sol.max_violation, float(units.thrust_n(thrust_bound)), rtn,
+                   arrival)
 
     @property
     def stage_start_s(self) -> np.ndarray:

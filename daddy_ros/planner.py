@@ -33,7 +33,7 @@ from .frames import grid_of
 from .plan import (SATURATION_SLACK, Code, Level, Plan, ReplanOutcome, read_plan_file,
                    write_plan_file)
 from .replan_policy import LADDER_MIN_GAIN, ReplanPolicy, margin_ratings
-from .shift import MIN_STAGES_LEFT, Shifted, shift_plan
+from .shift import Shifted, shift_plan
 
 
 # the settings the solver options of each kind of re-plan are made of (``ReplanPolicy.of``)
@@ -175,7 +175,7 @@ class GuidancePlanner:
         shifted = self.shift(plan, stamp_s, x0)
         warm = shifted.start is not None
         start = shifted.start or WarmStart(self.case.cold_guess(shifted.problem.N))
-        opts = self.policy.options(warm, arrival=shifted.problem.N <= MIN_STAGES_LEFT)
+        opts = self.policy.options(warm, arrival=shifted.arrival)
         # the current plan may already fly above the derating: start from the rung it was
         # solved on, or the lowest rating it keeps to, instead of failing on the bounds below
         rung = self._start_rung(plan, start.U) if warm else 0
@@ -195,7 +195,7 @@ class GuidancePlanner:
             return ReplanOutcome(False, Level.WARN, "cancelled: the plan in force is kept",
                                  request_id, time.perf_counter() - t0, None,
                                  best.sol.iterations, warm, Code.CANCELLED)
-        return self._adopt(best, shifted.problem, start.U, warm, stamp_s, request_id,
+        return self._adopt(best, shifted.arrival, start.U, warm, stamp_s, request_id,
                            time.perf_counter() - t0, budget)
 
     def _solve(self, problem: Problem, start: WarmStart, opts, run: _Run) -> _Attempt:
@@ -252,7 +252,7 @@ class GuidancePlanner:
                     break
         return best
 
-    def _adopt(self, best: _Attempt, problem: Problem, U_guess: np.ndarray, warm: bool,
+    def _adopt(self, best: _Attempt, arrival: bool, U_guess: np.ndarray, warm: bool,
                stamp_s: float, request_id: str, dt: float, budget_s: float) -> ReplanOutcome:
         """Store the new plan if it may replace the one in force, and say why or why not."""
         sol, v = best.sol, best.verdict
@@ -271,7 +271,8 @@ class GuidancePlanner:
                                      Code.INFEASIBLE)
         # the controls as flown (saturated onto the bound), and their keep-out margin
         sol = replace(sol, U=v.U, min_path_margin=v.path_margin)
-        plan = Plan.of(sol, v.X, stamp_s, self.units, best.problem.u_max, request_id, dt, warm)
+        plan = Plan.of(sol, v.X, stamp_s, self.units, best.problem.u_max, request_id, dt, warm,
+                       arrival)
         self.set_plan(plan)
         level, reason, code = Level.OK, "re-optimised", Code.OK
         if not v.feasible:

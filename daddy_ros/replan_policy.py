@@ -31,7 +31,7 @@ The core names this preset (``SolverOptions.warm_replan``); why each of its sett
   expected, the ladder and the last valid plan handle them, and the extra solve cost them
   seconds (halo, 20 flights: the slowest re-plan 17.2 s with it, 2.8 s without; Earth-Mars,
   10 flights: 6.5 s CPU per flight against 5.1 s, the same misses).
-The arrival phase (the re-gridded last stages) keeps the case's AUL tolerance, Newton active
+The arrival phase (the split last stages) keeps the case's AUL tolerance, Newton active
 set and fresh expansions for the polish: its plans decide the arrival miss.
 
 Plans keep a thrust margin for closed-loop corrections and give it up rung by rung

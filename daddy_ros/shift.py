@@ -1,12 +1,13 @@
 """The warm-start shift: the remaining problem of a plan in flight, from a new state at a new
-time, and the arrival phase's re-grid and terminal constraints. ROS-free.
+time, and the arrival phase's stages and terminal constraints. ROS-free.
 
 Stages already executed are dropped and the time to go is kept: the first remaining stage is
 shortened to end on the plan's stage boundary, or merged into the next when shorter than
 MIN_STAGE_FRACTION of a stage (boundaries and lengths on the scenario's grid, ``frames``: time,
 or the true longitude of Earth-centred scenarios, whose time to go is then the arrival-time
-constraint's). Fewer than MIN_STAGES_LEFT stages are re-gridded into that many
-(the arrival phase), so that enough controls remain for the terminal constraints.
+constraint's). Fewer than MIN_STAGES_LEFT stages are split into that many (``split_stages``),
+so that enough controls remain for the terminal constraints: the arrival phase, which every
+re-plan of an arrival plan stays in (``Plan.arrival``), whatever number of stages it leaves.
 """
 from __future__ import annotations
 
@@ -25,7 +26,7 @@ from .plan import TIME_TOLERANCE_S, Code, Plan
 
 # a first remaining stage shorter than this fraction of a nominal stage is merged into the next
 MIN_STAGE_FRACTION = 0.25
-MIN_STAGES_LEFT = 4  # a re-plan keeps at least this many stages to the end (re-gridded)
+MIN_STAGES_LEFT = 4  # a re-plan keeps at least this many stages to the end (split)
 ARRIVAL_SPEED_SCALE_M_S = 0.01  # a position one arrival tolerance off weighs as 1 cm/s
 
 
@@ -37,7 +38,7 @@ class Shifted:
         problem: from the new state, with the remaining stages (normalised).
         start: the plan's controls, duals, rho and stage maps for those stages (None without
             a plan: a cold solve).
-        arrival: the stages were re-gridded (the arrival phase).
+        arrival: the arrival phase (stages split, the position within the tolerance).
     """
 
     problem: Problem
@@ -81,14 +82,10 @@ def shift_plan(base: Problem, plan: Plan | None, t_s: float, x_cart: np.ndarray,
         maps = None if maps is None else maps.tail(
             k0, first_valid=abs(first - dts[0]) <= tolerance)
         dts[0] = first
-    arrival = len(dts) < MIN_STAGES_LEFT
+    arrival = len(dts) < MIN_STAGES_LEFT or plan.arrival
     if arrival:
-        # re-grid what is left into MIN_STAGES_LEFT equal stages, warm-started from the
-        # plan's stage at each new stage's midpoint
-        total = float(np.sum(dts))
-        mids = (np.arange(MIN_STAGES_LEFT) + 0.5) * total / MIN_STAGES_LEFT
-        idx = np.minimum(np.searchsorted(np.cumsum(dts), mids), len(dts) - 1)
-        dts = np.full(MIN_STAGES_LEFT, total / MIN_STAGES_LEFT)
+        # split what is left into MIN_STAGES_LEFT stages flying the plan's thrust
+        dts, idx = split_stages(dts, MIN_STAGES_LEFT)
         U = U[idx]
         maps = nodes = None
         lam = None if lam is None else lam[:, idx]
@@ -99,6 +96,19 @@ def shift_plan(base: Problem, plan: Plan | None, t_s: float, x_cart: np.ndarray,
     if nodes is not None:
         nodes[0] = problem.x0
     return Shifted(problem, WarmStart(U, duals, plan.solution.rho, maps, nodes), arrival)
+
+
+def split_stages(dts: np.ndarray, n: int) -> tuple[np.ndarray, np.ndarray]:
+    """At least n stages spanning the stages dts (K,): the longest stage (the first of those
+    equal to round-off) halved until there are n. Returns the new lengths and, for each, the index of the
+    stage it lies in, so that the plan's controls U[idx] fly the same schedule: the re-plan
+    starts from the plan in force exactly, whatever its thrust does between the stages."""
+    dts, idx = list(np.asarray(dts, float)), list(range(len(dts)))
+    while len(dts) < n:
+        k = int(np.argmax(np.array(dts) >= (1.0 - 1e-9) * max(dts)))   # equal to round-off
+        dts[k:k + 1] = [0.5 * dts[k]] * 2
+        idx[k:k + 1] = [idx[k]] * 2
+    return np.array(dts), np.array(idx)
 
 
 def arrival_constraints(problem: Problem, tolerance_m: float, units: Units) -> Problem:

@@ -8,20 +8,23 @@ every estimate the loop corrects from, an execution error w on every flown piece
 pointing, as ``sim.TruthSim.apply`` draws them). The state deviation e (7: r, v, m) from the
 nominal and the thrust correction c (3) in force evolve as
 
-    piece [a, b] of stage k:  e <- Phi_x e + Phi_u (c + w),  w ~ N(0, Q(U_k))
+    piece [a, b] of stage k:  e <- Phi_x e + Phi_u (c + w),  w = S(U_k) z, z ~ N(0, I)
     stage boundary k (laws):  c <- K_k (e + nu)              (the node's tracking law, order 1)
-    arrival estimate:         c <- the re-plan's first re-gridded stage (below)
+    arrival estimate:         c <- the re-plan's corrections of its stages (below)
 
-A re-plan of the arrival phase (``daddy_ros.shift``) targets the velocity exactly and the
-position within ``arrival_tolerance_m``. To first order it is the least correction, over the
-remaining time re-gridded into ``shift.MIN_STAGES_LEFT`` stages and weighted like the laws'
-(``policy.correction_scale``), that nulls the terminal velocity predicted from the estimate e +
-nu; where that leaves the predicted position outside the tolerance, the position is brought to
-the tolerance's sphere as well (the radial projection). That projection is why the terminal
-dispersion is not a Gaussian of the errors and is sampled (``samples`` draws of every error),
-not propagated as a covariance. Drift re-plans are not modelled: to first order a re-plan and
-the next law null the same predicted error. A stage without a law re-plans like an arrival
-estimate.
+A re-plan of the arrival phase (``daddy_ros.shift``) starts from the plan in force and targets
+the velocity exactly and the position within ``arrival_tolerance_m``. To first order it is the
+least change to the corrections in force, over the remaining time cut into
+``shift.MIN_STAGES_LEFT`` stages and weighted like the laws' (``policy.correction_scale``),
+that nulls the terminal velocity predicted from the estimate e + nu with those corrections;
+where that leaves the predicted position outside the tolerance, the position is brought to the
+tolerance's sphere as well (the radial projection). Every stage's thrust stays within the
+rating (a convex programme per draw, ``_Targeting._least``); a draw whose rows the rating
+cannot meet keeps the velocity's correction, or its best effort. The projection and the
+rating are why the terminal dispersion is not a Gaussian of the errors and is sampled
+(``samples`` draws of every error), not propagated as a covariance. Drift re-plans are not
+modelled: to first order a re-plan and the next law null the same predicted error. A stage
+without a law re-plans like an arrival estimate.
 """
 from __future__ import annotations
 
@@ -137,7 +140,7 @@ def predict(config: CampaignConfig, samples: int = 20_000, seed: int = 0,
         action = _correction(flight, laws, g, t0, dt_stage, last_law)
         if action is not None:
             seen = e + rng.normal(size=(samples, NX)) * nav         # the estimate's deviation
-            ends, c = action(seen, radius)
+            ends, c = action(seen, radius, ends, c)
         for a, b in flight.pieces(t0, t1, ends):
             Fx, Fu = flight.maps(a, b)
             j = np.searchsorted(ends, a + 1e-6, side="right") - 1
@@ -166,18 +169,18 @@ def _correction(flight: _Flight, laws, g, t: float, dt_stage: float, last_law: i
         return _Targeting(flight, t)            # no law: a re-plan
     K = laws.coefficients[k, 1:, :]             # (7, 3): c = seen @ K, for stage k
     span = np.array([t, t + dt_stage])
-    return lambda seen, radius: (span, (seen @ K)[:, None, :])
+    return lambda seen, radius, ends, c: (span, (seen @ K)[:, None, :])
 
 
 class _Targeting:
     """A re-plan's first-order correction from t (module docstring): the thrust change of each
-    re-gridded stage for a seen deviation."""
+    stage of the re-plan for a seen deviation."""
 
     def __init__(self, flight: _Flight, t: float):
         self.edges = edges = np.linspace(t, flight.end, MIN_STAGES_LEFT + 1)
         blocks = [flight.pieces(a, b) for a, b in zip(edges[:-1], edges[1:])]
         to_end = np.eye(NX)                            # Phi from the end of a piece to t_f
-        sens = []                                      # each re-gridded stage's d x_f / d c
+        sens = []                                      # each stage's d x_f / d c
         for stage in reversed(blocks):
             M = np.zeros((NX, NU))
             for a, b in reversed(stage):
@@ -192,47 +195,90 @@ class _Targeting:
         self.thrust = U.ravel()
         self.rating = float(flight.units.thrust(flight.case.spacecraft.max_thrust_n))
 
-    def __call__(self, seen: np.ndarray, radius: float):
-        predicted = seen @ self.phi.T                  # (S, 6) the terminal deviation, uncorrected
-        c = -predicted[:, 3:6] @ np.linalg.pinv(self.M[3:6]).T     # the velocity rows only
+    def __call__(self, seen: np.ndarray, radius: float, ends: np.ndarray, c: np.ndarray):
+        """The corrections (edges (stages + 1,), (S, stages, 3)) from the seen deviations
+        (S, 7) and the corrections in force (ends (J + 1,), c (S, J, 3)): the re-plan starts
+        from the plan in force, each new stage from the correction at its midpoint."""
+        mid = 0.5 * (self.edges[:-1] + self.edges[1:])
+        j = np.searchsorted(ends, mid, side="right") - 1
+        held = np.where(((j >= 0) & (j < c.shape[1]))[None, :, None],
+                        c[:, np.clip(j, 0, c.shape[1] - 1)], 0.0)
+        kept = held.reshape(len(seen), -1) / self.scale    # (S, 3 * stages) scaled
+        # (S, 6) the terminal deviation flying the plan in force
+        predicted = seen @ self.phi.T + kept @ self.M.T
+        c = kept + self._least(self.M[3:6], -predicted[:, 3:6], kept)[0]   # the velocity rows
         if radius:
-            pos = predicted[:, :3] + c @ self.M[:3].T
+            pos = predicted[:, :3] + (c - kept) @ self.M[:3].T
             r = np.linalg.norm(pos, axis=1)
             out = np.flatnonzero(r > radius)
             if out.size:                               # onto the tolerance's sphere as well
                 goal = np.zeros((out.size, 6))
                 goal[:, :3] = pos[out] * (radius / r[out])[:, None]
-                both = (goal - predicted[out]) @ np.linalg.pinv(self.M).T
-                # within the rating only: else the plan keeps the velocity's (best effort)
-                fits = np.all(self._norms(both) <= self.rating, axis=1)
-                c[out[fits]] = both[fits]
+                step, fits = self._least(self.M, goal - predicted[out], kept[out])
+                # where the rating leaves that out of reach, the plan keeps the velocity's
+                # (best effort)
+                c[out[fits]] = kept[out[fits]] + step[fits]
         return self.edges, self._clipped(c)
 
-    def _norms(self, c: np.ndarray) -> np.ndarray:
-        """(S, stages) the thrust of each re-gridded stage with the scaled corrections c."""
-        u = (self.thrust + c * self.scale).reshape(len(c), -1, NU)
-        return np.linalg.norm(u, axis=2)
+    def _least(self, A: np.ndarray, b: np.ndarray, kept: np.ndarray,
+               iterations: int = 500, tol: float = 1e-9):
+        """(S, 3 * stages) the least scaled change d to the corrections kept (S, 3 * stages)
+        with d A^T = b (S, rows) and every stage's thrust |U_i + (kept_i + d_i) s_i| within
+        the rating: a convex programme, solved for all samples at once by ADMM (Boyd et al.
+        2011, section 5.1: the affine rows and the thrust balls as the two sets), each
+        sample until its two points agree to ``tol`` of the rating. A sample whose rows are
+        out of reach within the rating gets the ADMM's point on the balls (its best effort);
+        the second value says which samples met the rows (S,)."""
+        pinv = np.linalg.pinv(A)
+        d = b @ pinv.T                                   # the least-norm change
+        z = self._onto_rating(d, kept)
+        w = d - z
+        met = np.abs(w).max(axis=1) <= tol * self.rating
+        todo = np.flatnonzero(~met)
+        for _ in range(iterations):
+            if not todo.size:
+                break
+            v = 0.5 * (z[todo] - w[todo])                # argmin |d|^2/2 + |d - z + w|^2/2
+            d[todo] = v - (v @ A.T - b[todo]) @ pinv.T   # onto the rows
+            z[todo] = self._onto_rating(d[todo] + w[todo], kept[todo])
+            gap = d[todo] - z[todo]
+            w[todo] += gap
+            now = np.abs(gap).max(axis=1) <= tol * self.rating
+            met[todo[now]] = True
+            todo = todo[~now]
+        return np.where(met[:, None], d, z), met
+
+    def _onto_rating(self, d: np.ndarray, kept: np.ndarray) -> np.ndarray:
+        """The nearest scaled changes to d (S, 3 * stages) whose thrust keeps the rating."""
+        return self._within(kept + d) - kept
 
     def _clipped(self, c: np.ndarray) -> np.ndarray:
         """(S, stages, 3) the thrust changes, a thrust past the rating scaled back onto it."""
+        return (self._within(c) * self.scale).reshape(len(c), -1, NU)
+
+    def _within(self, c: np.ndarray) -> np.ndarray:
+        """The scaled corrections c (S, 3 * stages) with each stage's thrust |U_i + c_i s_i|
+        scaled back onto the rating where it passes it (the nearest such thrust)."""
         u = (self.thrust + c * self.scale).reshape(len(c), -1, NU)
         norm = np.linalg.norm(u, axis=2, keepdims=True)
         u = np.where(norm > self.rating, u * self.rating / np.maximum(norm, 1e-300), u)
-        return u - self.thrust.reshape(-1, NU)
+        return (u.reshape(len(c), -1) - self.thrust) / self.scale
 
 
 def _execution(U: np.ndarray, config: CampaignConfig) -> np.ndarray:
-    """Covariance (3, 3) of the execution error on a commanded thrust U (normalised): the
-    magnitude's along U, the pointing's across it (a rotation by N(0, sigma) about a random
-    axis normal to U: sigma^2 / 2 per transverse axis)."""
+    """The square root S (3, 3) of the execution error's covariance on a commanded thrust U
+    (normalised; w = S z, z ~ N(0, I)): the magnitude's along U, the pointing's across it (a
+    rotation by N(0, sigma) about a random axis normal to U: sigma^2 / 2 per transverse axis).
+    Along and across are orthogonal projections, so S = a P + b (I - P) squares to the
+    covariance a^2 P + b^2 (I - P)."""
     mag = float(np.linalg.norm(U))
     if mag == 0.0:
         return np.zeros((NU, NU))
     u = U / mag
-    across = np.eye(NU) - np.outer(u, u)
+    along = np.outer(u, u)
     sp = np.radians(config.execution.pointing_deg)
-    return (config.execution.magnitude * mag) ** 2 * np.outer(u, u) + \
-        0.5 * (sp * mag) ** 2 * across
+    return config.execution.magnitude * mag * along + \
+        np.sqrt(0.5) * sp * mag * (np.eye(NU) - along)
 
 
 def _si_scale(units) -> np.ndarray:

@@ -71,3 +71,54 @@ def test_daddy_campaign_predict_prints_the_prediction_beside_the_runs(tmp_path, 
     assert (tmp_path / "p.png").stat().st_size > 10_000
     assert main(["predict", str(config), "--samples", "500"]) == 0   # a campaign file: no runs
     assert "x [m]" in capsys.readouterr().out
+
+
+def test_execution_errors_spread_the_open_loop_as_flown():
+    """Only execution errors (1 % magnitude, 1 deg pointing on every flown piece), open loop:
+    the predicted terminal spread is the flown one's to within the sampling error of 24
+    flights (ratio of the position and velocity standard deviations within [0.5, 2])."""
+    config = CampaignConfig.from_dict({
+        **QUIET, "initial_state": {"position_m": 0.0, "velocity_m_s": 0.0},
+        "execution": {"magnitude": 0.01, "pointing_deg": 1.0},
+        "guidance": {"self_replan": False}})
+    flown = np.array([_flown(config, seed)[1] for seed in range(1, 25)])
+    predicted = predict(config, samples=4000).deviations_si
+    for rows in (slice(0, 3), slice(3, 6)):
+        ratio = np.linalg.norm(predicted[:, rows].std(axis=0)) / \
+            np.linalg.norm(flown[:, rows].std(axis=0))
+        assert 0.5 < ratio < 2.0, ratio
+
+
+def test_an_arrival_re_plans_correction_is_the_least_within_the_thrust_rating():
+    """The model's arrival re-plan (``_Targeting._least``): velocity changes pushing the
+    nominal thrust 0-2 % harder along itself (the halo's last arc flies at 95 % of its rating)
+    are met by the least change keeping every stage within the rating -- SLSQP's answer to
+    1e-6 --, and 30-50 % harder called out of reach (a point within the rating), as SLSQP
+    finds no point meeting them either."""
+    from scipy.optimize import minimize
+    from daddy_sim.campaign_prediction import NU, _Flight, _Targeting
+    config = CampaignConfig()
+    planner, _ = nominal_planner(config.case, 60.0, config.guidance.arrival_tolerance_m)
+    flight = _Flight(planner)
+    T = _Targeting(flight, flight.end - 1.5 * flight.end / len(flight.sol.U))
+    A = T.M[3:6]
+    wanted = np.outer([0.0, 0.01, 0.02, 0.3, 0.4, 0.5], T.thrust / T.scale) + \
+        np.random.default_rng(3).normal(size=(6, A.shape[1])) * 2e-3
+    b = wanted @ A.T
+    d, met = T._least(A, b, np.zeros_like(wanted))
+
+    def thrust(x):
+        return np.linalg.norm((T.thrust + x * T.scale).reshape(-1, NU), axis=1)
+
+    assert max(thrust(x).max() for x in d) <= T.rating * (1 + 1e-9)
+    for i in range(len(b)):
+        ref = minimize(lambda x: x @ x, np.zeros(A.shape[1]), jac=lambda x: 2 * x,
+                       method="SLSQP", options=dict(ftol=1e-14, maxiter=500),
+                       constraints=[{"type": "eq", "fun": lambda x, i=i: A @ x - b[i]},
+                                    {"type": "ineq", "fun": lambda x: T.rating - thrust(x)}])
+        feasible = np.abs(A @ ref.x - b[i]).max() <= 1e-8 * np.abs(b[i]).max() and \
+            thrust(ref.x).max() <= T.rating * (1 + 1e-9)
+        assert met[i] == feasible, i
+        if feasible:
+            assert np.abs(d[i] - ref.x).max() <= 1e-6 * np.abs(ref.x).max(), i
+    assert met[:3].all() and not met[3:].any()

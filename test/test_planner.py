@@ -82,6 +82,46 @@ def test_shift_regrids_the_last_stages(planner):
     np.testing.assert_array_equal(U, plan.solution.U[[-2, -2, -1, -1]])
 
 
+def test_the_arrival_split_flies_the_plan_in_force_exactly(planner):
+    """Three whole stages left: split into MIN_STAGES_LEFT by halving the longest (the first
+    of equal ones), each new stage flying its old stage's thrust, so the warm start from the
+    plan's node arrives where the plan does."""
+    plan = planner.plan
+    dt, X = plan.stage_dt_s, plan.solution.X
+    t = plan.end_s - dt[-3] - dt[-2] - dt[-1]
+    s = planner.shift(plan, t, planner.units.cartesian_normalised(plan.states_si[-4]))
+    assert s.arrival and s.problem.N == MIN_STAGES_LEFT
+    np.testing.assert_allclose(s.problem.stage_dt * planner.units.tu_s,
+                               [dt[-3] / 2, dt[-3] / 2, dt[-2], dt[-1]], rtol=1e-12)
+    np.testing.assert_array_equal(s.start.U, plan.solution.U[[-3, -3, -2, -1]])
+    flown = s.problem.rollout(s.start.U)[-1]
+    assert np.max(np.abs(flown[:6] - X[-1][:6])) < 1e-8 * np.max(np.abs(X[-1][:6]))
+
+
+def test_a_plan_of_the_arrival_phase_re_plans_in_the_arrival_phase(planner):
+    """An arrival plan keeps its position tolerance in every re-plan of it, even where the
+    shift leaves MIN_STAGES_LEFT stages or more (no flip to the exact target and back); a
+    plan that is not one targets the position exactly there; a re-plan of the arrival phase
+    stores an arrival plan."""
+    from dataclasses import replace
+    pl = GuidancePlanner("earth_mars", arrival_tolerance_m=300e3)
+    plan = pl.load_plan(PLANS_DIR / "earth_mars_fuel.json", T0_S)
+    dt = plan.stage_dt_s
+    t = plan.end_s - np.sum(dt[-5:])                  # five stages left
+    x = pl.units.cartesian_normalised(plan.states_si[-6])
+    exact = pl.shift(plan, t, x)
+    assert not exact.arrival and exact.problem.terminal_constraints(
+        exact.problem.x_target)[1] == 0
+    sticky = pl.shift(replace(plan, arrival=True), t, x)
+    assert sticky.arrival and sticky.problem.N == 5
+    assert sticky.problem.terminal_constraints(sticky.problem.x_target)[1] == 1
+    t = plan.end_s - 0.5 * dt[-1]
+    s = plan.states_si[-1]
+    out = pl.replan(s[:3], s[3:6], s[6], t, "arrival", now_s=t)
+    assert out.ok and out.plan.arrival, out.reason
+    assert not plan.arrival
+
+
 def test_arrival_phase_targets_velocity_and_a_position_ball():
     pl = GuidancePlanner("earth_mars", arrival_tolerance_m=300e3)
     plan = pl.load_plan(PLANS_DIR / "earth_mars_fuel.json", T0_S)
