@@ -3,9 +3,9 @@ time, and the arrival phase's stages and terminal constraints. ROS-free.
 
 Stages already executed are dropped and the time to go is kept: the first remaining stage is
 shortened to end on the plan's stage boundary, or merged into the next when shorter than
-MIN_STAGE_FRACTION of a stage (boundaries and lengths on the scenario's grid, ``frames``: time,
-or the true longitude of Earth-centred scenarios, whose time to go is then the arrival-time
-constraint's). Fewer than MIN_STAGES_LEFT stages are split into that many (``split_stages``),
+MIN_STAGE_FRACTION of a stage, except in an arrival plan (boundaries and lengths on the
+scenario's grid, ``frames``: time, or the true longitude of Earth-centred scenarios, whose
+time to go is then the arrival-time constraint's). Fewer than MIN_STAGES_LEFT stages are split into that many (``split_stages``),
 so that enough controls remain for the terminal constraints: the arrival phase, which every
 re-plan of an arrival plan stays in (``Plan.arrival``), whatever number of stages it leaves.
 """
@@ -71,7 +71,8 @@ def shift_plan(base: Problem, plan: Plan | None, t_s: float, x_cart: np.ndarray,
     nominal = float(np.median(lengths))
     maps = plan.solution.stage_maps
     nodes = plan.solution.X[k0:].copy()   # the plan's states at the remaining stage ends
-    if first < MIN_STAGE_FRACTION * nominal and len(dts) > 1:
+    # (an arrival plan keeps a short first stage: merged, it would fly the next one's thrust)
+    if first < MIN_STAGE_FRACTION * nominal and len(dts) > 1 and not plan.arrival:
         nodes = nodes[1:]
         dts = dts[1:]
         dts[0] += first

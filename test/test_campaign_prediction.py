@@ -4,7 +4,6 @@ prints it beside a results file's runs."""
 import json
 
 import numpy as np
-import pytest
 
 from daddy_sim.campaign_prediction import compare, predict
 from daddy_sim.campaigns import CampaignConfig, Dispersion

@@ -100,9 +100,9 @@ def test_the_arrival_split_flies_the_plan_in_force_exactly(planner):
 
 def test_a_plan_of_the_arrival_phase_re_plans_in_the_arrival_phase(planner):
     """An arrival plan keeps its position tolerance in every re-plan of it, even where the
-    shift leaves MIN_STAGES_LEFT stages or more (no flip to the exact target and back); a
-    plan that is not one targets the position exactly there; a re-plan of the arrival phase
-    stores an arrival plan."""
+    shift leaves MIN_STAGES_LEFT stages or more (no flip to the exact target and back), and
+    its schedule (a short first stage is not merged); a plan that is not one targets the
+    position exactly there; a re-plan of the arrival phase stores an arrival plan."""
     from dataclasses import replace
     pl = GuidancePlanner("earth_mars", arrival_tolerance_m=300e3)
     plan = pl.load_plan(PLANS_DIR / "earth_mars_fuel.json", T0_S)
@@ -112,9 +112,17 @@ def test_a_plan_of_the_arrival_phase_re_plans_in_the_arrival_phase(planner):
     exact = pl.shift(plan, t, x)
     assert not exact.arrival and exact.problem.terminal_constraints(
         exact.problem.x_target)[1] == 0
-    sticky = pl.shift(replace(plan, arrival=True), t, x)
+    arriving = replace(plan, arrival=True)
+    sticky = pl.shift(arriving, t, x)
     assert sticky.arrival and sticky.problem.N == 5
     assert sticky.problem.terminal_constraints(sticky.problem.x_target)[1] == 1
+    # a short first stage: merged into the next (flying its thrust), except in an arrival plan
+    t += 0.9 * dt[-5]
+    assert pl.shift(plan, t, x).problem.N == 4
+    short = pl.shift(arriving, t, x)
+    assert short.problem.N == 5
+    assert short.problem.stage_dt[0] * pl.units.tu_s == pytest.approx(0.1 * dt[-5], rel=1e-6)
+    np.testing.assert_array_equal(short.start.U, plan.solution.U[-5:])
     t = plan.end_s - 0.5 * dt[-1]
     s = plan.states_si[-1]
     out = pl.replan(s[:3], s[3:6], s[6], t, "arrival", now_s=t)
