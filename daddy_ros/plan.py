@@ -194,7 +194,8 @@ class ReplanOutcome:
 def write_plan_file(path: str | Path, plan: Plan, scenario: str) -> None:
     """Write ``plan`` (epoch, provenance and solution) atomically to ``path``."""
     data = {"format": PLAN_FORMAT, "scenario": scenario, "epoch_s": plan.epoch_s,
-            "request_id": plan.request_id, "solution": plan.solution.to_dict()}
+            "request_id": plan.request_id, "arrival": plan.arrival,
+            "solution": plan.solution.to_dict()}
     path = Path(path)
     tmp = path.with_name(path.name + ".tmp")
     tmp.write_text(json.dumps(data, allow_nan=False))
@@ -202,13 +203,16 @@ def write_plan_file(path: str | Path, plan: Plan, scenario: str) -> None:
 
 
 def read_plan_file(path: str | Path, scenario: str, max_stages: int,
-                   max_thrust_n: float) -> tuple[Solution, float, str]:
-    """(solution, epoch s, request id) of a file written by ``write_plan_file`` for
-    ``scenario``. Raises DaddyError naming what is wrong with the file."""
+                   max_thrust_n: float) -> tuple[Solution, float, str, bool]:
+    """(solution, epoch s, request id, arrival plan) of a file written by ``write_plan_file``
+    for ``scenario``. Raises DaddyError naming what is wrong with the file."""
     try:
         data = json.loads(Path(path).read_text())
         sol = Solution.from_dict(data["solution"])
         epoch = float(data["epoch_s"])
+        arrival = data.get("arrival", False)
+        if not isinstance(arrival, bool):
+            raise TypeError(f"arrival must be true or false, got {arrival!r}")
     except (OSError, ValueError, KeyError, TypeError) as exc:
         raise DaddyError(f"persisted plan {path}: unreadable ({exc!r})") from exc
     if data.get("format") != PLAN_FORMAT or data.get("scenario") != scenario:
@@ -220,4 +224,4 @@ def read_plan_file(path: str | Path, scenario: str, max_stages: int,
         raise DaddyError(f"persisted plan {path} has a bad epoch, stage count or values")
     if np.max(np.linalg.norm(thrust, axis=1)) > max_thrust_n * (1 + SATURATION_SLACK):
         raise DaddyError(f"persisted plan {path} violates the thrust bound")
-    return sol, epoch, str(data.get("request_id", "restored"))
+    return sol, epoch, str(data.get("request_id", "restored")), arrival

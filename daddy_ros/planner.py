@@ -348,10 +348,11 @@ class GuidancePlanner:
             self.policy = self.policy.with_warm(homotopy=(sol.fuel_step,))
         return self._adopt_solution(sol, epoch_s, "nominal")
 
-    def _adopt_solution(self, sol: Solution, epoch_s: float, request_id: str) -> Plan:
-        """Make a stored solution (stages starting at epoch_s) the current plan, with its stage
-        maps expanded now (one batched call) so that the first re-optimisation from it is as
-        fast as the later ones."""
+    def _adopt_solution(self, sol: Solution, epoch_s: float, request_id: str,
+                        arrival: bool = False) -> Plan:
+        """Make a stored solution (stages starting at epoch_s; ``arrival``: one of the arrival
+        phase) the current plan, with its stage maps expanded now (one batched call) so that
+        the first re-optimisation from it is as fast as the later ones."""
         if sol.stage_maps is None:
             try:
                 problem = self.base_problem.with_x0(sol.X[0], sol.stage_dt, sol.t_start)
@@ -360,7 +361,7 @@ class GuidancePlanner:
             except (DaddyError, ValueError, ArithmeticError):
                 sol.stage_maps = None   # re-optimisations then roll out and expand afresh
         bound = self.rated_problems[self._rung_for(sol.U)].u_max
-        plan = Plan.of(sol, sol.X, epoch_s, self.units, bound, request_id)
+        plan = Plan.of(sol, sol.X, epoch_s, self.units, bound, request_id, arrival=arrival)
         self.set_plan(plan)
         return plan
 
@@ -374,6 +375,6 @@ class GuidancePlanner:
     def restore_plan(self, path: str | Path) -> Plan:
         """Adopt a plan written by ``save_plan`` (same scenario; its epoch is kept). Raises
         DaddyError naming what is wrong with the file."""
-        sol, epoch, request_id = read_plan_file(path, self.case.name, self.base_problem.N,
-                                                self.case.spacecraft.max_thrust_n)
-        return self._adopt_solution(sol, epoch, request_id)
+        sol, epoch, request_id, arrival = read_plan_file(
+            path, self.case.name, self.base_problem.N, self.case.spacecraft.max_thrust_n)
+        return self._adopt_solution(sol, epoch, request_id, arrival)

@@ -5,9 +5,10 @@ Stages already executed are dropped and the time to go is kept: the first remain
 shortened to end on the plan's stage boundary, or merged into the next when shorter than
 MIN_STAGE_FRACTION of a stage, except in an arrival plan (boundaries and lengths on the
 scenario's grid, ``frames``: time, or the true longitude of Earth-centred scenarios, whose
-time to go is then the arrival-time constraint's). Fewer than MIN_STAGES_LEFT stages are split into that many (``split_stages``),
-so that enough controls remain for the terminal constraints: the arrival phase, which every
-re-plan of an arrival plan stays in (``Plan.arrival``), whatever number of stages it leaves.
+time to go is then the arrival-time constraint's). Fewer than MIN_STAGES_LEFT stages are split
+into that many (``split_stages``), so that enough controls remain for the terminal
+constraints: the arrival phase, which every re-plan of an arrival plan stays in
+(``Plan.arrival``), whatever number of stages it leaves.
 """
 from __future__ import annotations
 
@@ -101,9 +102,10 @@ def shift_plan(base: Problem, plan: Plan | None, t_s: float, x_cart: np.ndarray,
 
 def split_stages(dts: np.ndarray, n: int) -> tuple[np.ndarray, np.ndarray]:
     """At least n stages spanning the stages dts (K,): the longest stage (the first of those
-    equal to round-off) halved until there are n. Returns the new lengths and, for each, the index of the
-    stage it lies in, so that the plan's controls U[idx] fly the same schedule: the re-plan
-    starts from the plan in force exactly, whatever its thrust does between the stages."""
+    equal to round-off) halved until there are n. Returns the new lengths and, for each, the
+    index of the stage it lies in, so that the plan's controls U[idx] fly the same schedule:
+    the re-plan starts from the plan in force exactly, whatever its thrust does between the
+    stages."""
     dts, idx = list(np.asarray(dts, float)), list(range(len(dts)))
     while len(dts) < n:
         k = int(np.argmax(np.array(dts) >= (1.0 - 1e-9) * max(dts)))   # equal to round-off

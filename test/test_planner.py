@@ -312,9 +312,18 @@ def test_persistence_round_trip_and_bad_files(planner, tmp_path):
     assert plan.epoch_s == planner.plan.epoch_s
     np.testing.assert_array_equal(plan.thrust_n, planner.plan.thrust_n)
     np.testing.assert_array_equal(plan.solution.duals["lam"], planner.plan.solution.duals["lam"])
+    assert not plan.arrival
     data = json.loads(path.read_text())
     with pytest.raises(DaddyError, match="scenario"):
         GuidancePlanner("halo_l2_l1").restore_plan(path)
+    data["arrival"] = True                       # a plan of the arrival phase stays one
+    path.write_text(json.dumps(data))
+    assert other.restore_plan(path).arrival
+    data["arrival"] = "yes"
+    path.write_text(json.dumps(data))
+    with pytest.raises(DaddyError, match="arrival"):
+        other.restore_plan(path)
+    data["arrival"] = False
     data["epoch_s"] = "soon"
     path.write_text(json.dumps(data))
     with pytest.raises(DaddyError, match="unreadable"):
