@@ -98,7 +98,7 @@ def test_the_arrival_split_flies_the_plan_in_force_exactly(planner):
     assert np.max(np.abs(flown[:6] - X[-1][:6])) < 1e-8 * np.max(np.abs(X[-1][:6]))
 
 
-def test_a_plan_of_the_arrival_phase_re_plans_in_the_arrival_phase(planner):
+def test_a_plan_of_the_arrival_phase_re_plans_in_the_arrival_phase():
     """An arrival plan keeps its position tolerance in every re-plan of it, even where the
     shift leaves MIN_STAGES_LEFT stages or more (no flip to the exact target and back), and
     its schedule (a short first stage is not merged); a plan that is not one targets the
