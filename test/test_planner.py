@@ -60,12 +60,12 @@ def test_shift_drops_executed_stages_and_keeps_time_to_go(planner):
     np.testing.assert_array_equal(cold.problem.x0, x0)
 
 
-def test_shift_regrids_the_last_stages(planner):
+def test_shift_splits_the_last_stages(planner):
     plan = planner.plan
     dt = plan.stage_dt_s
     x0 = planner.plan.solution.X[0]
     tu = planner.units.tu_s
-    # half of the last stage left: re-gridded into MIN_STAGES_LEFT equal stages flying its thrust
+    # half of the last stage left: halved into MIN_STAGES_LEFT equal stages flying its thrust
     t = plan.end_s - 0.5 * dt[-1]
     s = planner.shift(plan, t, x0)
     prob, U, duals, maps = s.problem, s.start.U, s.start.duals, s.start.maps
@@ -74,7 +74,7 @@ def test_shift_regrids_the_last_stages(planner):
     np.testing.assert_array_equal(U, np.tile(plan.solution.U[-1], (MIN_STAGES_LEFT, 1)))
     assert maps is None   # a new grid: no maps
     assert duals["lam"].shape[1] == MIN_STAGES_LEFT
-    # two stages left: each new stage takes the control of the old stage holding its midpoint
+    # two stages left: each halved, each half flying its stage's thrust
     t = plan.end_s - dt[-2] - dt[-1]
     s = planner.shift(plan, t, x0)
     prob, U = s.problem, s.start.U
