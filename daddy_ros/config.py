@@ -60,8 +60,9 @@ class PlannerConfig:
                                        "yields a feasible plan (and re-plans are faster)",
                                        runtime=True)
     arrival_tolerance_m: float = option(0.0, "in the arrival phase (the last stages, split) "
-                                             "the terminal position may be this far from the "
-                                             "target, the velocity stays exact [m]; 0: position "
+                                             "the terminal position is aimed where the plan "
+                                             "arrives, brought within this distance of the "
+                                             "target, the velocity exact [m]; 0: position "
                                              "exact too", bounds=(0.0, 1e9), runtime=True)
     thrust_margin: float = option(0.05, "fraction of the thrust rating plans hold back for "
                                         "closed-loop corrections; a re-optimisation gives it up "

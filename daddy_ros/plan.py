@@ -87,7 +87,7 @@ class Plan:
         thrust_rtn: the thrust is in the radial / transverse / normal axes of the osculating
             orbit (Earth-centred scenarios), not in the scenario's frame.
         arrival: solved as the arrival phase (``shift``): its stages split, its terminal
-            position within the arrival tolerance; every re-plan of it is one too.
+            position aimed within the arrival tolerance; every re-plan of it is one too.
     """
 
     epoch_s: float

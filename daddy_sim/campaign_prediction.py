@@ -13,12 +13,12 @@ nominal and the thrust correction c (3) in force evolve as
     arrival estimate:         c <- the re-plan's corrections of its stages (below)
 
 A re-plan of the arrival phase (``daddy_ros.shift``) starts from the plan in force and targets
-the velocity exactly and the position within ``arrival_tolerance_m``. To first order it is the
-least change to the corrections in force, over the remaining time cut into
-``shift.MIN_STAGES_LEFT`` stages and weighted like the laws' (``policy.correction_scale``),
-that nulls the terminal velocity predicted from the estimate e + nu with those corrections;
-where that leaves the predicted position outside the tolerance, the position is brought to the
-tolerance's sphere as well (the radial projection). Every stage's thrust stays within the
+the velocity exactly and the position at its aim point: where the plan in force arrives from
+the estimate, brought onto the tolerance's sphere (the radial projection) when farther than
+``arrival_tolerance_m``. To first order it is the least change to the corrections in force,
+over the remaining time cut into ``shift.MIN_STAGES_LEFT`` stages and weighted like the laws'
+(``policy.correction_scale``), that moves the terminal state predicted from the estimate
+e + nu with those corrections onto that aim. Every stage's thrust stays within the
 rating (a convex programme per draw, ``_Targeting._least``); a draw whose rows the rating
 cannot meet keeps the velocity's correction, or its best effort. The projection and the
 rating are why the terminal dispersion is not a Gaussian of the errors and is sampled
@@ -37,7 +37,7 @@ from daddy_core.da.core import variables
 from daddy_core.integrators import rk78
 from daddy_core.policy import correction_scale, tracking_policy
 
-from daddy_ros.shift import MIN_STAGES_LEFT
+from daddy_ros.shift import MIN_STAGES_LEFT, split_stages
 from .campaigns import CampaignConfig
 from .closed_loop import flight_steps, nominal_planner
 from .sim import T0_S
@@ -160,24 +160,51 @@ def _correction(flight: _Flight, laws, g, t: float, dt_stage: float, last_law: i
     eps = 1e-6
     if g.arrival_stages and remaining <= g.arrival_stages + eps and \
             remaining > g.arrival_min_step + eps:
-        return _Targeting(flight, t)
+        return _replan(flight, t)
     k = int(round(t / dt_stage))
     if laws is None or abs(t - k * dt_stage) > 1e-6 * dt_stage or not 0 < k <= last_law \
             or (g.replan_every_stages and k % g.replan_every_stages):
         return None
     if not laws.has_law[k]:
-        return _Targeting(flight, t)            # no law: a re-plan
+        return _replan(flight, t)               # no law: a re-plan
     K = laws.coefficients[k, 1:, :]             # (7, 3): c = seen @ K, for stage k
     span = np.array([t, t + dt_stage])
     return lambda seen, radius, ends, c: (span, (seen @ K)[:, None, :])
 
 
-class _Targeting:
-    """A re-plan's first-order correction from t (module docstring): the thrust change of each
-    stage of the re-plan for a seen deviation."""
+def _replan(flight: _Flight, t: float):
+    """A re-plan from t, as the action (seen deviations (S, 7), tolerance radius, the
+    corrections in force (ends, c)) -> (edges, c): the plan in force's stages from t (a
+    re-plan's own, else the nominal's), split like the node's (``shift.split_stages``), each
+    new stage starting from the correction its part of the plan flies."""
+    def action(seen: np.ndarray, radius: float, ends: np.ndarray, c: np.ndarray):
+        edges = _replan_stages(flight, t, ends)
+        mid = 0.5 * (edges[:-1] + edges[1:])
+        j = np.searchsorted(ends, mid, side="right") - 1
+        held = np.where(((j >= 0) & (j < c.shape[1]))[None, :, None],
+                        c[:, np.clip(j, 0, c.shape[1] - 1)], 0.0)
+        return edges, _Targeting(flight, edges)(seen, radius, held)
+    return action
 
-    def __init__(self, flight: _Flight, t: float):
-        self.edges = edges = np.linspace(t, flight.end, MIN_STAGES_LEFT + 1)
+
+def _replan_stages(flight: _Flight, t: float, ends: np.ndarray) -> np.ndarray:
+    """(stages + 1,) the edges of a re-plan's stages from t: the remaining stages of the plan
+    in force -- a re-plan's, whose corrections span its stages to the end (more than one),
+    or the nominal's (a law's correction spans one nominal stage) --, the longest halved until
+    there are ``shift.MIN_STAGES_LEFT``, as the node's arrival phase flies them."""
+    replanned = len(ends) > 2 and abs(ends[-1] - flight.end) <= 1e-6
+    bounds = np.asarray(ends[1:] if replanned else [*flight.starts[1:], flight.end], float)
+    bounds = bounds[bounds > t + 1e-6]
+    dts, _ = split_stages(np.diff(np.r_[t, bounds]), MIN_STAGES_LEFT)
+    return t + np.r_[0.0, np.cumsum(dts)]
+
+
+class _Targeting:
+    """A re-plan's first-order correction over the stages ``edges`` (module docstring): the
+    thrust change of each stage for a seen deviation."""
+
+    def __init__(self, flight: _Flight, edges: np.ndarray):
+        self.edges = edges = np.asarray(edges, float)
         blocks = [flight.pieces(a, b) for a, b in zip(edges[:-1], edges[1:])]
         to_end = np.eye(NX)                            # Phi from the end of a piece to t_f
         sens = []                                      # each stage's d x_f / d c
@@ -195,30 +222,21 @@ class _Targeting:
         self.thrust = U.ravel()
         self.rating = float(flight.units.thrust(flight.case.spacecraft.max_thrust_n))
 
-    def __call__(self, seen: np.ndarray, radius: float, ends: np.ndarray, c: np.ndarray):
-        """The corrections (edges (stages + 1,), (S, stages, 3)) from the seen deviations
-        (S, 7) and the corrections in force (ends (J + 1,), c (S, J, 3)): the re-plan starts
-        from the plan in force, each new stage from the correction at its midpoint."""
-        mid = 0.5 * (self.edges[:-1] + self.edges[1:])
-        j = np.searchsorted(ends, mid, side="right") - 1
-        held = np.where(((j >= 0) & (j < c.shape[1]))[None, :, None],
-                        c[:, np.clip(j, 0, c.shape[1] - 1)], 0.0)
+    def __call__(self, seen: np.ndarray, radius: float, held: np.ndarray) -> np.ndarray:
+        """(S, stages, 3) the corrections from the seen deviations (S, 7) and the corrections
+        the plan in force flies on each stage (S, stages, 3)."""
         kept = held.reshape(len(seen), -1) / self.scale    # (S, 3 * stages) scaled
         # (S, 6) the terminal deviation flying the plan in force
         predicted = seen @ self.phi.T + kept @ self.M.T
-        c = kept + self._least(self.M[3:6], -predicted[:, 3:6], kept)[0]   # the velocity rows
-        if radius:
-            pos = predicted[:, :3] + (c - kept) @ self.M[:3].T
-            r = np.linalg.norm(pos, axis=1)
-            out = np.flatnonzero(r > radius)
-            if out.size:                               # onto the tolerance's sphere as well
-                goal = np.zeros((out.size, 6))
-                goal[:, :3] = pos[out] * (radius / r[out])[:, None]
-                step, fits = self._least(self.M, goal - predicted[out], kept[out])
-                # where the rating leaves that out of reach, the plan keeps the velocity's
-                # (best effort)
-                c[out[fits]] = kept[out[fits]] + step[fits]
-        return self.edges, self._clipped(c)
+        goal = np.zeros_like(predicted)               # the velocity nulled, the position kept
+        r = np.linalg.norm(predicted[:, :3], axis=1, keepdims=True)   # ... brought onto the
+        goal[:, :3] = predicted[:, :3] * np.minimum(1.0, radius / np.maximum(r, 1e-300))  # ball
+        step, fits = self._least(self.M, goal - predicted, kept)
+        c = kept + step
+        if not fits.all():    # out of reach within the rating: the velocity's (best effort)
+            out = np.flatnonzero(~fits)
+            c[out] = kept[out] + self._least(self.M[3:6], -predicted[out, 3:6], kept[out])[0]
+        return self._clipped(c)
 
     def _least(self, A: np.ndarray, b: np.ndarray, kept: np.ndarray,
                iterations: int = 500, tol: float = 1e-9):
