@@ -123,9 +123,8 @@ def arrival_constraints(problem: Problem, tolerance_m: float, units: Units,
     In the last hours a position error of the order of the navigation error cannot be removed
     at any acceptable cost, and demanding it makes the problem infeasible and the best-effort
     plans trade velocity for it; a position merely kept within the ball leaves the plan free
-    to drift inside it towards whatever saves a fraction of a gram (a fuel-optimal arrival
-    flown noiselessly ended 231 m off the target, and 500 dispersed ones 66 m off on average),
-    so the arrival point would depend on how often the node re-plans. The aim point is unique
+    to drift inside it towards whatever saves a fraction of a gram, so the arrival point would
+    depend on how often the node re-plans (docs/design-notes.md, the arrival aim point). The aim point is unique
     and unbiased: the re-plans null the velocity and leave a position error inside the
     tolerance alone.
 

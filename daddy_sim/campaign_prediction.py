@@ -16,9 +16,9 @@ A re-plan of the arrival phase (``daddy_ros.shift``) starts from the plan in for
 the velocity exactly and the position at its aim point: where the plan in force arrives from
 the estimate, brought onto the tolerance's sphere (the radial projection) when farther than
 ``arrival_tolerance_m``. To first order it is the least change to the corrections in force,
-over the remaining time cut into ``shift.MIN_STAGES_LEFT`` stages and weighted like the laws'
-(``policy.correction_scale``), that moves the terminal state predicted from the estimate
-e + nu with those corrections onto that aim. Every stage's thrust stays within the
+on the node's own stages (the plan in force's, split into ``shift.MIN_STAGES_LEFT``) and
+weighted like the laws' (``policy.correction_scale``), that moves the terminal state
+predicted from the estimate e + nu with those corrections onto that aim. Every stage's thrust stays within the
 rating (a convex programme per draw, ``_Targeting._least``); a draw whose rows the rating
 cannot meet keeps the velocity's correction, or its best effort. The projection and the
 rating are why the terminal dispersion is not a Gaussian of the errors and is sampled
