@@ -124,9 +124,9 @@ def arrival_constraints(problem: Problem, tolerance_m: float, units: Units,
     at any acceptable cost, and demanding it makes the problem infeasible and the best-effort
     plans trade velocity for it; a position merely kept within the ball leaves the plan free
     to drift inside it towards whatever saves a fraction of a gram, so the arrival point would
-    depend on how often the node re-plans (docs/design-notes.md, the arrival aim point). The aim point is unique
-    and unbiased: the re-plans null the velocity and leave a position error inside the
-    tolerance alone.
+    depend on how often the node re-plans (docs/design-notes.md, the arrival aim point). The
+    aim point is unique and unbiased: the re-plans null the velocity and leave a position
+    error inside the tolerance alone.
 
     The position rows are (r - r_aim) s / tolerance with s = 1 cm/s in normalised speed units:
     a position one tolerance off weighs as much as a 1 cm/s velocity miss wherever terminal

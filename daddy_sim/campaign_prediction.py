@@ -18,13 +18,13 @@ the estimate, brought onto the tolerance's sphere (the radial projection) when f
 ``arrival_tolerance_m``. To first order it is the least change to the corrections in force,
 on the node's own stages (the plan in force's, split into ``shift.MIN_STAGES_LEFT``) and
 weighted like the laws' (``policy.correction_scale``), that moves the terminal state
-predicted from the estimate e + nu with those corrections onto that aim. Every stage's thrust stays within the
-rating (a convex programme per draw, ``_Targeting._least``); a draw whose rows the rating
-cannot meet keeps the velocity's correction, or its best effort. The projection and the
-rating are why the terminal dispersion is not a Gaussian of the errors and is sampled
-(``samples`` draws of every error), not propagated as a covariance. Drift re-plans are not
-modelled: to first order a re-plan and the next law null the same predicted error. A stage
-without a law re-plans like an arrival estimate.
+predicted from the estimate e + nu with those corrections onto that aim. Every stage's thrust
+stays within the rating (a convex programme per draw, ``_Targeting._least``); a draw whose
+rows the rating cannot meet keeps the velocity's correction, or its best effort. The
+projection and the rating are why the terminal dispersion is not a Gaussian of the errors
+and is sampled (``samples`` draws of every error), not propagated as a covariance. Drift
+re-plans are not modelled: to first order a re-plan and the next law null the same predicted
+error. A stage without a law re-plans like an arrival estimate.
 """
 from __future__ import annotations
 
@@ -143,8 +143,7 @@ def predict(config: CampaignConfig, samples: int = 20_000, seed: int = 0,
             ends, c = action(seen, radius, ends, c)
         for a, b in flight.pieces(t0, t1, ends):
             Fx, Fu = flight.maps(a, b)
-            j = np.searchsorted(ends, a + 1e-6, side="right") - 1
-            now = c[:, j] if 0 <= j < c.shape[1] else 0.0
+            now = _in_force(ends, c, [a + 1e-6])[:, 0]
             w = rng.normal(size=(samples, NU)) @ _execution(sol.U[flight.stage(a)], config).T
             e = e @ Fx.T + (now + w) @ Fu.T
     return Prediction(e[:, :6] * scale[:6], time.process_time() - cpu)
@@ -179,12 +178,17 @@ def _replan(flight: _Flight, t: float):
     new stage starting from the correction its part of the plan flies."""
     def action(seen: np.ndarray, radius: float, ends: np.ndarray, c: np.ndarray):
         edges = _replan_stages(flight, t, ends)
-        mid = 0.5 * (edges[:-1] + edges[1:])
-        j = np.searchsorted(ends, mid, side="right") - 1
-        held = np.where(((j >= 0) & (j < c.shape[1]))[None, :, None],
-                        c[:, np.clip(j, 0, c.shape[1] - 1)], 0.0)
+        held = _in_force(ends, c, 0.5 * (edges[:-1] + edges[1:]))   # at the stages' midpoints
         return edges, _Targeting(flight, edges)(seen, radius, held)
     return action
+
+
+def _in_force(ends: np.ndarray, c: np.ndarray, times) -> np.ndarray:
+    """(S, len(times), 3) the corrections in force (stage ends (J + 1,), c (S, J, 3)) at the
+    times on the clock; zero outside their stages."""
+    j = np.searchsorted(ends, np.asarray(times, float), side="right") - 1
+    inside = (j >= 0) & (j < c.shape[1])
+    return np.where(inside[None, :, None], c[:, np.clip(j, 0, c.shape[1] - 1)], 0.0)
 
 
 def _replan_stages(flight: _Flight, t: float, ends: np.ndarray) -> np.ndarray:
