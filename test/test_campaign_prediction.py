@@ -105,7 +105,8 @@ def test_execution_errors_spread_the_open_loop_as_flown():
 
 
 def test_an_arrival_re_plans_correction_is_the_least_within_the_thrust_rating():
-    """The model's arrival re-plan (``_Targeting._least``): velocity changes pushing the
+    """The model's arrival re-plan (``_Targeting._least``, Newton on the dual): velocity
+    changes pushing the
     nominal thrust 0-2 % harder along itself (the halo's last arc flies at 95 % of its rating)
     are met by the least change keeping every stage within the rating -- SLSQP's answer to
     1e-6 --, and 30-50 % harder called out of reach (a point within the rating), as SLSQP
@@ -121,7 +122,7 @@ def test_an_arrival_re_plans_correction_is_the_least_within_the_thrust_rating():
     wanted = np.outer([0.0, 0.01, 0.02, 0.3, 0.4, 0.5], T.thrust / T.scale) + \
         np.random.default_rng(3).normal(size=(6, A.shape[1])) * 2e-3
     b = wanted @ A.T
-    d, met = T._least(A, b, np.zeros_like(wanted))
+    d, met = T._least(A, b, np.zeros_like(wanted), T.rating)
 
     def thrust(x):
         return np.linalg.norm((T.thrust + x * T.scale).reshape(-1, NU), axis=1)
@@ -138,3 +139,52 @@ def test_an_arrival_re_plans_correction_is_the_least_within_the_thrust_rating():
         if feasible:
             assert np.abs(d[i] - ref.x).max() <= 1e-6 * np.abs(ref.x).max(), i
     assert met[:3].all() and not met[3:].any()
+
+
+def test_a_re_plan_out_of_reach_meets_the_velocity_then_comes_nearest_in_position():
+    """The model's best effort (``_Targeting._best_effort``), as the node's best-effort plans
+    do: terminal changes the rating cannot meet get the velocity's rows met where they can be
+    and the position's as near as they come (SLSQP's least squares under the velocity rows
+    and the rating, to 1e-5 of the position's miss: the barrier's gap), else the velocity's
+    as near as they come (SLSQP's); every stage's thrust within the rating."""
+    from scipy.optimize import minimize
+    from daddy_sim.campaign_prediction import NU, _Flight, _Targeting
+    config = CampaignConfig()
+    planner, _ = nominal_planner(config.case, 60.0, config.guidance.arrival_tolerance_m)
+    flight = _Flight(planner)
+    T = _Targeting(flight, np.linspace(flight.end - 1.5 * flight.end / len(flight.sol.U),
+                                       flight.end, 5))
+    rng = np.random.default_rng(5)
+    n = T.M.shape[1]
+    # velocity from 2 % (within reach) to 40 % (out of it) more thrust along the nominal's,
+    # the position's rows from changes well past the rating
+    along = np.outer([0.02, 0.02, 0.4], T.thrust / T.scale)
+    rows = np.hstack([(along + rng.normal(size=(3, n)) * 2.0) @ T.M[:3].T,
+                      (along + rng.normal(size=(3, n)) * 2e-3) @ T.M[3:6].T])
+    kept = np.zeros((3, n))
+    d = T._best_effort(rows, kept)
+
+    def thrust(x):
+        return np.linalg.norm((T.thrust + x * T.scale).reshape(-1, NU), axis=1)
+
+    rated = {"type": "ineq", "fun": lambda x: T.rating - thrust(x)}
+    reached = []
+    for i in range(3):
+        assert thrust(d[i]).max() <= T.rating * (1 + 1e-9)
+        velocity = {"type": "eq", "fun": lambda x, i=i: T.M[3:6] @ x - rows[i, 3:]}
+        met = minimize(lambda x: 0.0, np.zeros(n), method="SLSQP", constraints=[velocity, rated],
+                       options=dict(ftol=1e-14, maxiter=500))
+        reached.append(np.abs(T.M[3:6] @ met.x - rows[i, 3:]).max() <=
+                       1e-8 * np.abs(rows[i, 3:]).max())
+        if reached[-1]:
+            A, b, cons = T.M[:3], rows[i, :3], [velocity, rated]
+            assert np.abs(T.M[3:6] @ d[i] - rows[i, 3:]).max() <= \
+                1e-6 * np.abs(rows[i, 3:]).max(), i
+        else:
+            A, b, cons = T.M[3:6], rows[i, 3:], [rated]
+        ref = minimize(lambda x: np.sum((A @ x - b) ** 2), d[i] * 0.5, method="SLSQP",
+                       jac=lambda x: 2 * A.T @ (A @ x - b), constraints=cons,
+                       options=dict(ftol=1e-16, maxiter=1000))
+        ours, theirs = np.linalg.norm(A @ d[i] - b), np.linalg.norm(A @ ref.x - b)
+        assert ours <= theirs + 1e-5 * np.linalg.norm(b), (i, ours, theirs)
+    assert reached == [True, True, False]   # both branches
