@@ -19,8 +19,10 @@ the estimate, brought onto the tolerance's sphere (the radial projection) when f
 on the node's own stages (the plan in force's, split into ``shift.MIN_STAGES_LEFT``) and
 weighted like the laws' (``policy.correction_scale``), that moves the terminal state
 predicted from the estimate e + nu with those corrections onto that aim. Every stage's thrust
-stays within the rating (a convex programme per draw, ``_Targeting._least``); a draw whose
-rows the rating cannot meet keeps the velocity's correction, or its best effort. The
+stays within the rating (a convex programme per draw, ``_Targeting._least``), climbing the
+node's thrust-margin ladder from the rung the plan in force keeps to; a draw whose rows the
+full rating cannot meet gets the node's best effort: the velocity met, the position as near
+as it comes (``_Targeting._best_effort``). The
 projection and the rating are why the terminal dispersion is not a Gaussian of the errors
 and is sampled (``samples`` draws of every error), not propagated as a covariance. Drift
 re-plans are not modelled: to first order a re-plan and the next law null the same predicted
@@ -344,9 +346,9 @@ class _Targeting:
         least squares, with every stage's thrust within the rating, from a change ``start``
         that meets the rows and the rating. A convex programme per draw, solved for all at once
         by a barrier method on the rows' null space (Boyd & Vandenberghe 2004, sections 9.5
-        and 11.3: Newton steps with backtracking inside the balls, the objective's weight
-        raised twentyfold until the barrier's duality gap is below ``gap`` of the start's squared
-        miss)."""
+        and 11.3: Newton steps from 0.99 of the longest step inside the balls, backtracking;
+        the objective's weight raised twentyfold from a gap of 1 % of the start's squared miss
+        until the barrier's duality gap is below ``gap`` of it)."""
         S, n = start.shape
         if not S:
             return start
@@ -358,28 +360,33 @@ class _Targeting:
         k = len(G)
         u0 = (self.thrust + (kept + start) * self.scale).reshape(S, stages, NU)
         r0 = start @ A.T - b                                       # (S, rows) the start's miss
-        w = 1.0 / np.maximum(np.einsum("sr,sr->s", r0, r0), 1e-300)[:, None]
+        miss2 = np.einsum("sr,sr->s", r0, r0)
+        far = miss2 > (1e-9 * self.rating * np.abs(A / self.scale).max()) ** 2
+        w = 1.0 / np.where(far, miss2, 1.0)[:, None]   # a start that meets b (as _least) stays
         R2 = (np.maximum(self.rating, np.linalg.norm(u0, axis=2).max(axis=1)) *
               (1 + 1e-6))[:, None] ** 2                            # (S, 1) a strict interior
         y = np.zeros((S, k))
 
+        def thrust(i, y):
+            return u0[i] + (y @ G.reshape(k, -1)).reshape(len(i), stages, NU)
+
         def merit(i, y, t):
             r = r0[i] + y @ P.T
-            slack = R2[i] - np.sum((u0[i] + np.einsum("sk,kjc->sjc", y, G)) ** 2, axis=2)
+            slack = R2[i] - np.sum(thrust(i, y) ** 2, axis=2)
             with np.errstate(invalid="ignore", divide="ignore"):
                 barrier = -np.log(slack).sum(axis=1)
             return np.where((slack > 0).all(axis=1),
                             0.5 * t * w[i, 0] * np.einsum("sr,sr->s", r, r) + barrier, np.inf)
 
-        t = 1.0
+        t = 100.0 * stages                   # the gap starts at 1 % of the start's squared miss
         while stages / t > gap:
-            todo = np.arange(S)
-            value = merit(todo, y, t)
+            todo = np.flatnonzero(far)
+            value = merit(np.arange(S), y, t)
             for _ in range(50):                                   # Newton on t f + barrier
                 if not todo.size:
                     break
                 i, yi = todo, y[todo]
-                u = u0[i] + np.einsum("sk,kjc->sjc", yi, G)       # (s, stages, 3)
+                u = thrust(i, yi)                                 # (s, stages, 3)
                 inv = 1.0 / (R2[i] - np.sum(u * u, axis=2))       # (s, stages) 1 / slack
                 Gu = np.einsum("kjc,sjc->sjk", G, u)              # (s, stages, k)
                 tw = t * w[i]
@@ -387,9 +394,14 @@ class _Targeting:
                 Gi = Gu * inv[:, :, None]
                 H = tw[:, :, None] * (P.T @ P) + 2 * (inv @ GG).reshape(-1, k, k) + \
                     4 * Gi.transpose(0, 2, 1) @ Gi
+                H += 1e-12 * np.trace(H, axis1=1, axis2=2)[:, None, None] * np.eye(k)
                 step = -np.linalg.solve(H, grad[:, :, None])[:, :, 0]
                 decrement = -np.einsum("sk,sk->s", grad, step)
-                alpha = np.ones((len(i), 1))
+                # the longest step inside every ball (|u + a du|^2 = R^2), 1 at most
+                du = (step @ G.reshape(k, -1)).reshape(len(i), stages, NU)
+                qa, qb = np.sum(du * du, axis=2), np.sum(u * du, axis=2)
+                room = (-qb + np.sqrt(qb * qb + qa / inv)) / np.maximum(qa, 1e-300)
+                alpha = np.minimum(1.0, 0.99 * room.min(axis=1))[:, None]
                 for _ in range(30):                               # backtracking
                     trial = merit(i, yi + alpha * step, t)
                     short = ~(trial <= value[i] - 0.25 * alpha[:, 0] * decrement)
