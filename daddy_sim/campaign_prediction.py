@@ -19,7 +19,7 @@ the estimate, brought onto the tolerance's sphere (the radial projection) when f
 on the node's own stages (the plan in force's, split into ``shift.MIN_STAGES_LEFT``) and
 weighted like the laws' (``policy.correction_scale``), that moves the terminal state
 predicted from the estimate e + nu with those corrections onto that aim. Every stage's thrust
-stays within the rating (a convex programme per draw, ``_Targeting._least``), climbing the
+stays within the rating (a convex programme per draw, ``thrust_balls``), climbing the
 node's thrust-margin ladder from the rung the plan in force keeps to; a draw whose rows the
 full rating cannot meet gets the node's best effort: the velocity met, the position as near
 as it comes (``_Targeting._best_effort``). The
@@ -44,8 +44,9 @@ from daddy_ros.shift import MIN_STAGES_LEFT, split_stages
 from .campaigns import CampaignConfig
 from .closed_loop import flight_steps, nominal_planner
 from .sim import T0_S
+from .thrust_balls import NU, ThrustBalls
 
-NX, NU = 7, 3
+NX = 7
 
 
 @dataclass(frozen=True)
@@ -229,6 +230,7 @@ class _Targeting:
         M = np.hstack(sens[::-1]) * self.scale         # (7, 3 * stages), scaled controls
         self.phi, self.M = to_end[:6], M[:6]
         self.thrust = U.ravel()
+        self.balls = ThrustBalls(self.thrust, self.scale)
         self.ratings = flight.ratings
         self.rating = float(self.ratings[-1])
 
@@ -246,7 +248,7 @@ class _Targeting:
         rung = self._rung(kept)
         for k, rating in enumerate(self.ratings):     # the margin ladder, from the plan's rung
             todo = np.flatnonzero(~fits & (rung <= k))
-            step, met = self._least(self.M, rows[todo], kept[todo], rating)
+            step, met = self.balls.least_change(self.M, rows[todo], kept[todo], rating)
             c[todo[met]] += step[met]
             fits[todo[met]] = True
         out = np.flatnonzero(~fits)   # out of reach at the full rating: the node's best effort
@@ -256,8 +258,7 @@ class _Targeting:
     def _rung(self, kept: np.ndarray) -> np.ndarray:
         """(S,) the lowest rung of the margin ladder whose rating the plan in force (the
         corrections kept, (S, 3 * stages)) keeps to, as ``GuidancePlanner._rung_for``."""
-        u = (self.thrust + kept * self.scale).reshape(len(kept), len(self.thrust) // NU, NU)
-        peak = np.linalg.norm(u, axis=2).max(axis=1, initial=0.0)
+        peak = np.linalg.norm(self.balls.thrust_of(kept), axis=2).max(axis=1, initial=0.0)
         return np.searchsorted(self.ratings * (1 + SATURATION_SLACK), peak).clip(
             0, len(self.ratings) - 1)
 
@@ -266,170 +267,19 @@ class _Targeting:
         the velocity's rows met if they can be, the position's then as near as they come (least
         squares); else the velocity's as near as they come. The node's best-effort plans do
         this (docs/design-notes.md, the model's best effort)."""
+        balls, rating = self.balls, self.rating
         d = np.zeros_like(kept)
-        step, met = self._least(self.M[3:6], rows[:, 3:6], kept, self.rating)
-        d[met] = self._nearest(self.M[:3], rows[met, :3], self.M[3:6], rows[met, 3:6],
-                               step[met], kept[met])
-        inside = self._onto_rating(np.zeros_like(kept[~met]), kept[~met], self.rating)
-        d[~met] = self._nearest(self.M[3:6], rows[~met, 3:6], self.M[:0], rows[~met, :0],
-                                inside, kept[~met])
-        return self._onto_rating(d, kept, self.rating)   # (the barrier's ball is 1e-6 wider)
-
-    def _least(self, A: np.ndarray, b: np.ndarray, kept: np.ndarray, rating: float,
-               iterations: int = 40, tol: float = 1e-9):
-        """(S, 3 * stages) the least scaled change d to the corrections kept (S, 3 * stages)
-        with d A^T = b (S, m) and every stage's thrust |U_i + (kept_i + d_i) s_i| within
-        ``rating``, and (S,) which draws it exists for. A convex programme per draw, solved
-        for all at once on its dual: with multipliers lam (S, m) of the rows, d = P(lam A),
-        the projection onto the thrust balls, maximises the concave, once differentiable
-        g(lam) = lam.b - |lam A|^2 / 2 + dist(lam A, balls)^2 / 2, whose gradient is the rows'
-        miss b - d A^T; semismooth Newton steps (the projection's generalised Jacobian) with
-        backtracking, each draw until its rows are met to ``tol`` of what the rating moves
-        them. A draw is out of reach when lam.b exceeds the support function of the rows the
-        balls reach (lam separates b from them: Boyd & Vandenberghe 2004, section 5.8), or
-        after ``iterations``."""
-        S, m = b.shape
-        stages = A.shape[1] // NU
-        A3 = A.reshape(m, stages, NU)
-        AA = np.einsum("mjc,ljc->jml", A3, A3).reshape(stages, -1)      # (stages, m * m)
-        row_tol = tol * rating * np.abs(A / self.scale).max()
-        radius = rating / self.scale[::NU]                              # (stages,) scaled
-        lam, d = np.zeros((S, m)), np.zeros_like(kept)
-        met = np.zeros(S, bool)
-
-        def dual(i, lam):
-            x = lam @ A
-            p = self._onto_rating(x, kept[i], rating)
-            return np.einsum("sm,sm->s", lam, b[i]) - 0.5 * np.einsum("sn,sn->s", x, x) + \
-                0.5 * np.einsum("sn,sn->s", x - p, x - p), p
-
-        todo = np.arange(S)
-        for _ in range(iterations):
-            if not todo.size:
-                break
-            i = todo
-            now, d[i] = dual(i, lam[i])
-            miss = b[i] - d[i] @ A.T
-            met[i] = np.abs(miss).max(axis=1) <= row_tol
-            Al = np.einsum("mjc,sm->sjc", A3, lam[i])                  # (s, stages, 3)
-            centre = -(self.thrust / self.scale + kept[i]).reshape(len(i), stages, NU)
-            support = np.einsum("sjc,sjc->s", Al, centre) + np.linalg.norm(Al, axis=2) @ radius
-            apart = np.einsum("sm,sm->s", lam[i], b[i]) > \
-                support + row_tol * np.abs(lam[i]).sum(axis=1)
-            on = ~met[i] & ~apart
-            i, miss, now, todo = i[on], miss[on], now[on], i[on]
-            if not i.size:
-                break
-            # the projection's Jacobian per stage: I inside the ball, f (I - n n^T) outside
-            u = (self.thrust + (kept[i] + lam[i] @ A) * self.scale).reshape(len(i), stages, NU)
-            norm = np.maximum(np.linalg.norm(u, axis=2), 1e-300)
-            outside = norm > rating
-            f = np.where(outside, rating / norm, 1.0)
-            An = np.einsum("mjc,sjc->sjm", A3, u / norm[:, :, None])
-            H = (f @ AA).reshape(-1, m, m) - np.einsum("sj,sjm,sjl->sml", f * outside, An, An)
-            H += 1e-12 * np.trace(H, axis1=1, axis2=2)[:, None, None] * np.eye(m)
-            step = np.linalg.solve(H, miss[:, :, None])[:, :, 0]
-            slope = np.einsum("sm,sm->s", miss, step)
-            alpha = np.ones((len(i), 1))
-            for _ in range(30):                                       # backtracking
-                short = ~(dual(i, lam[i] + alpha * step)[0] >= now + 1e-4 * alpha[:, 0] * slope)
-                if not short.any():
-                    break
-                alpha[short] *= 0.5
-            lam[i] += alpha * step
-        return d, met
-
-    def _nearest(self, A: np.ndarray, b: np.ndarray, E: np.ndarray, e: np.ndarray,
-                 start: np.ndarray, kept: np.ndarray, gap: float = 1e-6) -> np.ndarray:
-        """(S, 3 * stages) the change d to the corrections kept (S, 3 * stages) that keeps the
-        rows d E^T = e (S, m; m may be 0) and brings the rows d A^T nearest to b (S, rows),
-        least squares, with every stage's thrust within the rating, from a change ``start``
-        that meets the rows and the rating. A convex programme per draw, solved for all at once
-        by a barrier method on the rows' null space (Boyd & Vandenberghe 2004, sections 9.5
-        and 11.3: Newton steps from 0.99 of the longest step inside the balls, backtracking;
-        the objective's weight raised twentyfold from a gap of 1 % of the start's squared miss
-        until the barrier's duality gap is below ``gap`` of it)."""
-        S, n = start.shape
-        if not S:
-            return start
-        stages = n // NU
-        null = np.linalg.svd(E)[2][len(E):].T if len(E) else np.eye(n)   # (n, k)
-        P = A @ null                                               # (rows, k)
-        G = (null.T * self.scale).reshape(-1, stages, NU)          # (k, stages, 3) thrust / y
-        GG = np.einsum("kjc,ljc->jkl", G, G).reshape(stages, -1)   # (stages, k * k)
-        k = len(G)
-        u0 = (self.thrust + (kept + start) * self.scale).reshape(S, stages, NU)
-        r0 = start @ A.T - b                                       # (S, rows) the start's miss
-        miss2 = np.einsum("sr,sr->s", r0, r0)
-        far = miss2 > (1e-9 * self.rating * np.abs(A / self.scale).max()) ** 2
-        w = 1.0 / np.where(far, miss2, 1.0)[:, None]   # a start that meets b (as _least) stays
-        R2 = (np.maximum(self.rating, np.linalg.norm(u0, axis=2).max(axis=1)) *
-              (1 + 1e-6))[:, None] ** 2                            # (S, 1) a strict interior
-        y = np.zeros((S, k))
-
-        def thrust(i, y):
-            return u0[i] + (y @ G.reshape(k, -1)).reshape(len(i), stages, NU)
-
-        def merit(i, y, t):
-            r = r0[i] + y @ P.T
-            slack = R2[i] - np.sum(thrust(i, y) ** 2, axis=2)
-            with np.errstate(invalid="ignore", divide="ignore"):
-                barrier = -np.log(slack).sum(axis=1)
-            return np.where((slack > 0).all(axis=1),
-                            0.5 * t * w[i, 0] * np.einsum("sr,sr->s", r, r) + barrier, np.inf)
-
-        t = 100.0 * stages                   # the gap starts at 1 % of the start's squared miss
-        while stages / t > gap:
-            todo = np.flatnonzero(far)
-            value = merit(np.arange(S), y, t)
-            for _ in range(50):                                   # Newton on t f + barrier
-                if not todo.size:
-                    break
-                i, yi = todo, y[todo]
-                u = thrust(i, yi)                                 # (s, stages, 3)
-                inv = 1.0 / (R2[i] - np.sum(u * u, axis=2))       # (s, stages) 1 / slack
-                Gu = np.einsum("kjc,sjc->sjk", G, u)              # (s, stages, k)
-                tw = t * w[i]
-                grad = tw * ((r0[i] + yi @ P.T) @ P) + 2 * np.einsum("sjk,sj->sk", Gu, inv)
-                Gi = Gu * inv[:, :, None]
-                H = tw[:, :, None] * (P.T @ P) + 2 * (inv @ GG).reshape(-1, k, k) + \
-                    4 * Gi.transpose(0, 2, 1) @ Gi
-                H += 1e-12 * np.trace(H, axis1=1, axis2=2)[:, None, None] * np.eye(k)
-                step = -np.linalg.solve(H, grad[:, :, None])[:, :, 0]
-                decrement = -np.einsum("sk,sk->s", grad, step)
-                # the longest step inside every ball (|u + a du|^2 = R^2), 1 at most
-                du = (step @ G.reshape(k, -1)).reshape(len(i), stages, NU)
-                qa, qb = np.sum(du * du, axis=2), np.sum(u * du, axis=2)
-                room = (-qb + np.sqrt(qb * qb + qa / inv)) / np.maximum(qa, 1e-300)
-                alpha = np.minimum(1.0, 0.99 * room.min(axis=1))[:, None]
-                for _ in range(30):                               # backtracking
-                    trial = merit(i, yi + alpha * step, t)
-                    short = ~(trial <= value[i] - 0.25 * alpha[:, 0] * decrement)
-                    if not short.any():
-                        break
-                    alpha[short] *= 0.5
-                moved = np.isfinite(trial) & ~short
-                y[i[moved]] = yi[moved] + alpha[moved] * step[moved]
-                value[i[moved]] = trial[moved]
-                todo = i[moved & (decrement > 1e-8)]
-            t *= 20.0
-        return start + y @ null.T
-
-    def _onto_rating(self, d: np.ndarray, kept: np.ndarray, rating: float) -> np.ndarray:
-        """The nearest scaled changes to d (S, 3 * stages) whose thrust keeps ``rating``."""
-        return self._within(kept + d, rating) - kept
+        step, met = balls.least_change(self.M[3:6], rows[:, 3:6], kept, rating)
+        d[met] = balls.nearest(self.M[:3], rows[met, :3], self.M[3:6], rows[met, 3:6],
+                               step[met], kept[met], rating)
+        inside = balls.within(kept[~met], rating) - kept[~met]
+        d[~met] = balls.nearest(self.M[3:6], rows[~met, 3:6], self.M[:0], rows[~met, :0],
+                                inside, kept[~met], rating)
+        return balls.within(kept + d, rating) - kept   # (the barrier's ball is 1e-6 wider)
 
     def _clipped(self, c: np.ndarray) -> np.ndarray:
         """(S, stages, 3) the thrust changes, a thrust past the rating scaled back onto it."""
-        return (self._within(c, self.rating) * self.scale).reshape(len(c), -1, NU)
-
-    def _within(self, c: np.ndarray, rating: float) -> np.ndarray:
-        """The scaled corrections c (S, 3 * stages) with each stage's thrust |U_i + c_i s_i|
-        scaled back onto ``rating`` where it passes it (the nearest such thrust)."""
-        u = (self.thrust + c * self.scale).reshape(len(c), len(self.thrust) // NU, NU)
-        norm = np.linalg.norm(u, axis=2, keepdims=True)
-        u = np.where(norm > rating, u * rating / np.maximum(norm, 1e-300), u)
-        return (u.reshape(c.shape) - self.thrust) / self.scale
+        return (self.balls.within(c, self.rating) * self.scale).reshape(len(c), -1, NU)
 
 
 def _execution(U: np.ndarray, config: CampaignConfig) -> np.ndarray:

@@ -105,12 +105,11 @@ def test_execution_errors_spread_the_open_loop_as_flown():
 
 
 def test_an_arrival_re_plans_correction_is_the_least_within_the_thrust_rating():
-    """The model's arrival re-plan (``_Targeting._least``, Newton on the dual): velocity
-    changes pushing the
-    nominal thrust 0-2 % harder along itself (the halo's last arc flies at 95 % of its rating)
-    are met by the least change keeping every stage within the rating -- SLSQP's answer to
-    1e-6 --, and 30-50 % harder called out of reach (a point within the rating), as SLSQP
-    finds no point meeting them either."""
+    """The model's arrival re-plan (``ThrustBalls.least_change``, Newton on the dual):
+    velocity changes pushing the nominal thrust 0-2 % harder along itself (the halo's last
+    arc flies at 95 % of its rating) are met by the least change keeping every stage within
+    the rating -- SLSQP's answer to 1e-6 --, and 30-50 % harder called out of reach (a point
+    within the rating), as SLSQP finds no point meeting them either."""
     from scipy.optimize import minimize
     from daddy_sim.campaign_prediction import NU, _Flight, _Targeting
     config = CampaignConfig()
@@ -122,7 +121,7 @@ def test_an_arrival_re_plans_correction_is_the_least_within_the_thrust_rating():
     wanted = np.outer([0.0, 0.01, 0.02, 0.3, 0.4, 0.5], T.thrust / T.scale) + \
         np.random.default_rng(3).normal(size=(6, A.shape[1])) * 2e-3
     b = wanted @ A.T
-    d, met = T._least(A, b, np.zeros_like(wanted), T.rating)
+    d, met = T.balls.least_change(A, b, np.zeros_like(wanted), T.rating)
 
     def thrust(x):
         return np.linalg.norm((T.thrust + x * T.scale).reshape(-1, NU), axis=1)
