@@ -102,7 +102,7 @@ class ThrustBalls:
 
     def nearest(self, A: np.ndarray, b: np.ndarray, E: np.ndarray, e: np.ndarray,
                 start: np.ndarray, kept: np.ndarray, rating: float,
-                gap: float = 1e-6) -> np.ndarray:
+                gap: float = 1e-4) -> np.ndarray:
         """(S, 3 * stages) the change d to the corrections kept (S, 3 * stages) that keeps the
         rows d E^T = e (S, m; m may be 0) and brings the rows d A^T nearest to b (S, rows),
         least squares, with every stage's thrust within the rating, from a change ``start``
@@ -142,7 +142,7 @@ class ThrustBalls:
                             0.5 * t * w[i, 0] * np.einsum("sr,sr->s", r, r) + barrier, np.inf)
 
         t = 100.0 * stages                   # the gap starts at 1 % of the start's squared miss
-        while stages / t > gap:
+        while True:
             todo = np.flatnonzero(far)
             value = merit(np.arange(S), y, t)
             for _ in range(50):                                   # Newton on t f + barrier
@@ -175,5 +175,6 @@ class ThrustBalls:
                 y[i[moved]] = yi[moved] + alpha[moved] * step[moved]
                 value[i[moved]] = trial[moved]
                 todo = i[moved & (decrement > 1e-8)]
+            if stages / t <= gap:      # the duality gap of the centred point
+                return start + y @ null.T
             t *= 20.0
-        return start + y @ null.T

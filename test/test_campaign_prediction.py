@@ -144,8 +144,8 @@ def test_a_re_plan_out_of_reach_meets_the_velocity_then_comes_nearest_in_positio
     """The model's best effort (``_Targeting._best_effort``), as the node's best-effort plans
     do: terminal changes the rating cannot meet get the velocity's rows met where they can be
     and the position's as near as they come (SLSQP's least squares under the velocity rows
-    and the rating, to 1e-5 of the position's miss: the barrier's gap), else the velocity's
-    as near as they come (SLSQP's); every stage's thrust within the rating."""
+    and the rating: all but 1 % of the way from the start, the barrier's gap), else the
+    velocity's as near as they come (SLSQP's); every stage's thrust within the rating."""
     from scipy.optimize import minimize
     from daddy_sim.campaign_prediction import NU, _Flight, _Targeting
     config = CampaignConfig()
@@ -185,5 +185,10 @@ def test_a_re_plan_out_of_reach_meets_the_velocity_then_comes_nearest_in_positio
                        jac=lambda x: 2 * A.T @ (A @ x - b), constraints=cons,
                        options=dict(ftol=1e-16, maxiter=1000))
         ours, theirs = np.linalg.norm(A @ d[i] - b), np.linalg.norm(A @ ref.x - b)
-        assert ours <= theirs + 1e-5 * np.linalg.norm(b), (i, ours, theirs)
+        # from where it starts (the velocity's least change, or the plan's thrust within the
+        # rating), the barrier closes all but 1 % of the way to SLSQP's miss
+        start = T.balls.least_change(T.M[3:6], rows[i:i + 1, 3:], kept[:1], T.rating)[0][0] \
+            if reached[-1] else T.balls.within(kept[:1], T.rating)[0] - kept[0]
+        first = np.linalg.norm(A @ start - b)
+        assert ours - theirs <= 1e-2 * (first - theirs), (i, first, ours, theirs)
     assert reached == [True, True, False]   # both branches
