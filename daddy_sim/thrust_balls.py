@@ -91,13 +91,15 @@ class ThrustBalls:
             H += 1e-12 * np.trace(H, axis1=1, axis2=2)[:, None, None] * np.eye(m)
             step = np.linalg.solve(H, miss[:, :, None])[:, :, 0]
             slope = np.einsum("sm,sm->s", miss, step)
-            alpha = np.ones((len(i), 1))
-            for _ in range(30):                                       # backtracking
-                short = ~(dual(i, lam[i] + alpha * step)[0] >= now + 1e-4 * alpha[:, 0] * slope)
-                if not short.any():
+            alpha = np.ones(len(i))
+            short = np.arange(len(i))                 # backtracking, on the draws still short
+            for _ in range(30):
+                trial = dual(i[short], lam[i[short]] + alpha[short, None] * step[short])[0]
+                short = short[~(trial >= now[short] + 1e-4 * alpha[short] * slope[short])]
+                if not short.size:
                     break
                 alpha[short] *= 0.5
-            lam[i] += alpha * step
+            lam[i] += alpha[:, None] * step
         return d, met
 
     def nearest(self, A: np.ndarray, b: np.ndarray, E: np.ndarray, e: np.ndarray,
@@ -164,15 +166,19 @@ class ThrustBalls:
                 du = (step @ G.reshape(k, -1)).reshape(len(i), stages, NU)
                 qa, qb = np.sum(du * du, axis=2), np.sum(u * du, axis=2)
                 room = (-qb + np.sqrt(qb * qb + qa / inv)) / np.maximum(qa, 1e-300)
-                alpha = np.minimum(1.0, 0.99 * room.min(axis=1))[:, None]
-                for _ in range(30):                               # backtracking
-                    trial = merit(i, yi + alpha * step, t)
-                    short = ~(trial <= value[i] - 0.25 * alpha[:, 0] * decrement)
-                    if not short.any():
+                alpha = np.minimum(1.0, 0.99 * room.min(axis=1))
+                trial = np.full(len(i), np.inf)
+                short = np.arange(len(i))             # backtracking, on the draws still short
+                for _ in range(30):
+                    trial[short] = merit(i[short], yi[short] + alpha[short, None] * step[short], t)
+                    short = short[~(trial[short] <= value[i[short]] -
+                                    0.25 * alpha[short] * decrement[short])]
+                    if not short.size:
                         break
                     alpha[short] *= 0.5
-                moved = np.isfinite(trial) & ~short
-                y[i[moved]] = yi[moved] + alpha[moved] * step[moved]
+                moved = np.ones(len(i), bool)
+                moved[short] = False
+                y[i[moved]] = yi[moved] + alpha[moved, None] * step[moved]
                 value[i[moved]] = trial[moved]
                 todo = i[moved & (decrement > 1e-8)]
             if stages / t <= gap:      # the duality gap of the centred point
