@@ -30,9 +30,8 @@ from .assessment import Assessment, assess
 from .checks import EstimateChecks
 from .config import PlannerConfig
 from .frames import grid_of
-from .plan import (SATURATION_SLACK, Code, Level, Plan, ReplanOutcome, read_plan_file,
-                   write_plan_file)
-from .replan_policy import LADDER_MIN_GAIN, ReplanPolicy, margin_ratings
+from .plan import Code, Level, Plan, ReplanOutcome, read_plan_file, write_plan_file
+from .replan_policy import LADDER_MIN_GAIN, ReplanPolicy, lowest_rung, margin_ratings
 from .shift import Shifted, shift_plan
 
 
@@ -308,11 +307,7 @@ class GuidancePlanner:
     def _rung_for(self, U: np.ndarray) -> int:
         """The lowest rung of the margin ladder whose bound the controls U (K, 3) keep to."""
         peak = float(np.max(np.linalg.norm(U, axis=1)))
-        rung = 0
-        while rung + 1 < len(self.rated_problems) and \
-                peak > self.rated_problems[rung].u_max * (1 + SATURATION_SLACK):
-            rung += 1
-        return rung
+        return int(lowest_rung(peak, [p.u_max for p in self.rated_problems]))
 
     def _rated(self, problem: Problem, rung: int) -> Problem:
         """``problem`` with the thrust bound of ``rated_problems[rung]``."""

@@ -42,10 +42,13 @@ from __future__ import annotations
 
 from dataclasses import dataclass, replace
 
+import numpy as np
+
 from daddy_core.catalogue import Case
 from daddy_core.solver import SolverOptions, case_options
 
 from .config import PlannerConfig
+from .plan import SATURATION_SLACK
 
 # augmented-Lagrangian tolerance of a polished warm re-optimisation without an explicit tol_aul
 WARM_TOL_AUL = 1e-5
@@ -102,6 +105,14 @@ class ReplanPolicy:
         ``SolverOptions.with_`` takes them (experiments)."""
         return replace(self, warm=self.warm.with_(**options),
                        arrival=self.arrival.with_(**options))
+
+
+def lowest_rung(peak, ratings) -> np.ndarray:
+    """The lowest rung of the margin ladder (its ``ratings``, lowest first, any one unit) whose
+    bound the peak thrust ``peak`` (scalar or (S,), same unit) keeps to, within the
+    saturation slack; the top rung when none does."""
+    bounds = np.asarray(ratings, float) * (1 + SATURATION_SLACK)
+    return np.searchsorted(bounds, peak).clip(0, len(bounds) - 1)
 
 
 def margin_ratings(rating_n: float, thrust_margin: float) -> list[float]:

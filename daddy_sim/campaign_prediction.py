@@ -39,7 +39,7 @@ from daddy_core.da.core import variables
 from daddy_core.integrators import rk78
 from daddy_core.policy import correction_scale, tracking_policy
 
-from daddy_ros.plan import SATURATION_SLACK
+from daddy_ros.replan_policy import lowest_rung
 from daddy_ros.shift import MIN_STAGES_LEFT, split_stages
 from .campaigns import CampaignConfig
 from .closed_loop import flight_steps, nominal_planner
@@ -259,8 +259,7 @@ class _Targeting:
         """(S,) the lowest rung of the margin ladder whose rating the plan in force (the
         corrections kept, (S, 3 * stages)) keeps to, as ``GuidancePlanner._rung_for``."""
         peak = np.linalg.norm(self.balls.thrust_of(kept), axis=2).max(axis=1, initial=0.0)
-        return np.searchsorted(self.ratings * (1 + SATURATION_SLACK), peak).clip(
-            0, len(self.ratings) - 1)
+        return lowest_rung(peak, self.ratings)
 
     def _best_effort(self, rows: np.ndarray, kept: np.ndarray) -> np.ndarray:
         """(S, 3 * stages) the change of a re-plan whose rows (S, 6) the rating cannot meet:
