@@ -36,6 +36,11 @@ class ThrustBalls:
         u = np.where(norm > rating, u * rating / np.maximum(norm, 1e-300), u)
         return (u.reshape(c.shape) - self.thrust) / self.scale
 
+    def row_tolerance(self, A: np.ndarray, rating: float, tol: float = 1e-9) -> float:
+        """How near rows d A^T count as met: ``tol`` of what a change of the rating moves
+        them by."""
+        return tol * rating * float(np.abs(A / self.scale).max())
+
     def least_change(self, A: np.ndarray, b: np.ndarray, kept: np.ndarray, rating: float,
                      iterations: int = 40, tol: float = 1e-9):
         """(S, 3 * stages) the least scaled change d to the corrections kept (S, 3 * stages)
@@ -53,8 +58,9 @@ class ThrustBalls:
         stages = A.shape[1] // NU
         A3 = A.reshape(m, stages, NU)
         AA = np.einsum("mjc,ljc->jml", A3, A3).reshape(stages, -1)      # (stages, m * m)
-        row_tol = tol * rating * np.abs(A / self.scale).max()
+        row_tol = self.row_tolerance(A, rating, tol)
         radius = rating / self.scale[::NU]                              # (stages,) scaled
+        centre = -(self.thrust / self.scale + kept).reshape(S, stages, NU)   # of the balls
         lam, d = np.zeros((S, m)), np.zeros_like(kept)
         met = np.zeros(S, bool)
 
@@ -73,8 +79,8 @@ class ThrustBalls:
             miss = b[i] - d[i] @ A.T
             met[i] = np.abs(miss).max(axis=1) <= row_tol
             Al = np.einsum("mjc,sm->sjc", A3, lam[i])                  # (s, stages, 3)
-            centre = -(self.thrust / self.scale + kept[i]).reshape(len(i), stages, NU)
-            support = np.einsum("sjc,sjc->s", Al, centre) + np.linalg.norm(Al, axis=2) @ radius
+            support = np.einsum("sjc,sjc->s", Al, centre[i]) + \
+                np.linalg.norm(Al, axis=2) @ radius
             apart = np.einsum("sm,sm->s", lam[i], b[i]) > \
                 support + row_tol * np.abs(lam[i]).sum(axis=1)
             on = ~met[i] & ~apart
@@ -125,7 +131,7 @@ class ThrustBalls:
         u0 = self.thrust_of(kept + start)
         r0 = start @ A.T - b                                       # (S, rows) the start's miss
         miss2 = np.einsum("sr,sr->s", r0, r0)
-        far = miss2 > (1e-9 * rating * np.abs(A / self.scale).max()) ** 2
+        far = miss2 > self.row_tolerance(A, rating) ** 2
         # the objective over the start's squared miss; a start that meets b stays
         w = 1.0 / np.where(far, miss2, 1.0)[:, None]
         R2 = (np.maximum(rating, np.linalg.norm(u0, axis=2).max(axis=1)) *

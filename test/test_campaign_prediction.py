@@ -111,20 +111,12 @@ def test_an_arrival_re_plans_correction_is_the_least_within_the_thrust_rating():
     the rating -- SLSQP's answer to 1e-6 --, and 30-50 % harder called out of reach (a point
     within the rating), as SLSQP finds no point meeting them either."""
     from scipy.optimize import minimize
-    from daddy_sim.campaign_prediction import NU, _Flight, _Targeting
-    config = CampaignConfig()
-    planner, _ = nominal_planner(config.case, 60.0, config.guidance.arrival_tolerance_m)
-    flight = _Flight(planner)
-    T = _Targeting(flight, np.linspace(flight.end - 1.5 * flight.end / len(flight.sol.U),
-                                       flight.end, 5))
+    T, thrust = _last_stages_targeting()
     A = T.M[3:6]
     wanted = np.outer([0.0, 0.01, 0.02, 0.3, 0.4, 0.5], T.thrust / T.scale) + \
         np.random.default_rng(3).normal(size=(6, A.shape[1])) * 2e-3
     b = wanted @ A.T
     d, met = T.balls.least_change(A, b, np.zeros_like(wanted), T.rating)
-
-    def thrust(x):
-        return np.linalg.norm((T.thrust + x * T.scale).reshape(-1, NU), axis=1)
 
     assert max(thrust(x).max() for x in d) <= T.rating * (1 + 1e-9)
     for i in range(len(b)):
@@ -147,12 +139,7 @@ def test_a_re_plan_out_of_reach_meets_the_velocity_then_comes_nearest_in_positio
     and the rating: all but 1 % of the way from the start, the barrier's gap), else the
     velocity's as near as they come (SLSQP's); every stage's thrust within the rating."""
     from scipy.optimize import minimize
-    from daddy_sim.campaign_prediction import NU, _Flight, _Targeting
-    config = CampaignConfig()
-    planner, _ = nominal_planner(config.case, 60.0, config.guidance.arrival_tolerance_m)
-    flight = _Flight(planner)
-    T = _Targeting(flight, np.linspace(flight.end - 1.5 * flight.end / len(flight.sol.U),
-                                       flight.end, 5))
+    T, thrust = _last_stages_targeting()
     rng = np.random.default_rng(5)
     n = T.M.shape[1]
     # velocity from 2 % (within reach) to 40 % (out of it) more thrust along the nominal's,
@@ -162,9 +149,6 @@ def test_a_re_plan_out_of_reach_meets_the_velocity_then_comes_nearest_in_positio
                       (along + rng.normal(size=(3, n)) * 2e-3) @ T.M[3:6].T])
     kept = np.zeros((3, n))
     d = T._best_effort(rows, kept)
-
-    def thrust(x):
-        return np.linalg.norm((T.thrust + x * T.scale).reshape(-1, NU), axis=1)
 
     rated = {"type": "ineq", "fun": lambda x: T.rating - thrust(x)}
     reached = []
@@ -192,3 +176,18 @@ def test_a_re_plan_out_of_reach_meets_the_velocity_then_comes_nearest_in_positio
         first = np.linalg.norm(A @ start - b)
         assert ours - theirs <= 1e-2 * (first - theirs), (i, first, ours, theirs)
     assert reached == [True, True, False]   # both branches
+
+
+def _last_stages_targeting():
+    """The model's arrival re-plan over the halo's last 1.5 nominal stages (four stages), and
+    the thrust [normalised] of each stage for scaled corrections x (3 * stages,)."""
+    from daddy_sim.campaign_prediction import NU, _Flight, _Targeting
+    config = CampaignConfig()
+    planner, _ = nominal_planner(config.case, 60.0, config.guidance.arrival_tolerance_m)
+    flight = _Flight(planner)
+    T = _Targeting(flight, np.linspace(flight.end - 1.5 * flight.end / len(flight.sol.U),
+                                       flight.end, 5))
+
+    def thrust(x):
+        return np.linalg.norm((T.thrust + x * T.scale).reshape(-1, NU), axis=1)
+    return T, thrust
