@@ -104,8 +104,8 @@ def violated_at_start(problem, u0: np.ndarray, tol: float) -> str | None:
     if bad.size == 0:
         return None
     i = int(bad[0])
-    return (f"g_path[{i}] is {value[i]:.3e} above its bound at x0, the fixed start, whatever "
-            "the control: no trajectory from x0 can hold it")
+    return (f"infeasible: g_path[{i}] is {value[i]:.3e} above its bound at x0, the fixed "
+            "start, whatever the control: no trajectory from x0 can hold it")
 
 
 @dataclass(frozen=True)

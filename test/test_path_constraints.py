@@ -134,7 +134,8 @@ def test_keep_out_around_the_start_is_infeasible_and_says_so_at_once():
     # x0 lies 81,514 km from the Moon: no control takes it out of a 90,000 km sphere
     problem = problem_from_case(HALO, r_min_km=90_000.0)
     sol = solve(problem, HALO.cold_guess(problem.N), options=case_options(HALO, True))
-    assert not sol.converged and "x0" in sol.reason and "g_path[0]" in sol.reason
+    assert not sol.converged and sol.infeasible and sol.reason.startswith("infeasible:")
+    assert "x0" in sol.reason and "g_path[0]" in sol.reason
     assert sol.iterations["ddp"] == 0
     assert np.all(np.isfinite(sol.X)) and np.all(np.isfinite(sol.U))
     # the margin is the returned (guess's) trajectory's: at x0 alone 8,486 km inside

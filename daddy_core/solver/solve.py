@@ -23,7 +23,7 @@ from ..phases import phase_report
 from ..policy import feedback_policy, fuel_policy
 from ..problem import Problem
 from . import end_game, infeasibility, path_exchange
-from .assemble import repropagation_miss, solution, unsolved
+from .assemble import repropagation_miss, solution, unsolved, within_thrust_bound
 from .blend import PAPER_GUESS, restart_from_blend, worth_restarting
 from .context import Clock, SolveContext
 from .deadline import CancelFlag
@@ -125,8 +125,12 @@ def _solve(problem: Problem, u_guess, method, fuel_optimal, polish, options, cas
                            Clock(o.run.time_budget_s, cancel=cancel), progress=progress,
                            rho0=warm.rho)
         why = None if p.g_path is None else violated_at_start(p, U0[0], o.newton.tol)
-        if why is not None:
-            return unsolved(p, U0, why, ctx.steps, method, case_name)
+        if why is None and o.end_game.certify_infeasibility:
+            end = infeasibility.contradicted_end(p, o)
+            why = None if end is None else end.reason()
+        if why is not None:   # infeasible before any iteration: the guess, within the bound
+            _, U0, _ = within_thrust_bound(p, None, U0, o.newton.tol)
+            return replace(unsolved(p, U0, why, ctx.steps, method, case_name), infeasible=True)
         game = exact_opening(ctx, U0, warm) if exact_start_wanted(ctx) else None
         if game is None:
             game = end_game.opening(ctx, start(ctx, U0, warm), warm.duals)
@@ -134,9 +138,11 @@ def _solve(problem: Problem, u_guess, method, fuel_optimal, polish, options, cas
 
     clock = Clock(opts.run.time_budget_s, cancel=cancel)
     sol = once(problem, u_guess, fuel_optimal, opts)
-    if problem.g_path is not None:
+    if problem.g_path is not None:   # (an infeasible end's guess gets its margin measured)
         sol = path_exchange.hold(problem, sol, lambda p, warm, o: once(p, warm, None, o), opts,
                                  progress)
+    if sol.infeasible:   # known before any iteration (x0 or the end contradicts the rows)
+        return sol
     def remaining():
         return (None if opts.run.time_budget_s is None
                 else opts.run.time_budget_s - (time.perf_counter() - clock.start))
