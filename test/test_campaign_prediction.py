@@ -71,6 +71,40 @@ def test_a_comparison_puts_the_prediction_inside_or_outside_the_runs_intervals()
     assert compare(wide, runs, 100.0).mean_inside.all()
 
 
+def test_the_runs_intervals_hold_their_95_percent_on_heavy_tails():
+    """The runs' interval of a standard deviation covers the true one about 95 % of the time
+    on samples with heavy tails (Student t, 5 degrees of freedom: kurtosis 9; the halo's
+    runs: 4-7) -- 200 campaigns of 300 runs against the known standard deviation: 91.5 %
+    here -- where the Gaussian chi-square interval, used before, covers it 74 % of the time;
+    and a constant axis gets its value as its interval."""
+    import warnings
+
+    from scipy import stats
+
+    from daddy_sim.campaign_prediction import Prediction, _bootstrap_95
+    nu, n, trials = 5, 300, 200
+    sigma = np.sqrt(nu / (nu - 2))                       # the t distribution's std
+    rng = np.random.default_rng(7)
+    lo, hi = stats.chi2.ppf([0.975, 0.025], n - 1)
+    covered = chi2 = 0
+    for _ in range(trials):
+        runs = rng.standard_t(nu, size=(n, 1))
+        s = runs.std(axis=0, ddof=1)
+        ci = _bootstrap_95(runs, lambda x, axis: x.std(axis=axis, ddof=1), s)
+        covered += ci[0, 0] <= sigma <= ci[0, 1]
+        chi2 += s[0] * np.sqrt((n - 1) / lo) <= sigma <= s[0] * np.sqrt((n - 1) / hi)
+    assert 0.88 <= covered / trials <= 0.99, covered
+    assert chi2 / trials <= 0.8, chi2
+    runs = np.zeros((50, 6))
+    runs[:, 0] = rng.normal(size=50)
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")                   # nothing reaches the user
+        c = compare(Prediction(np.zeros((10, 6)), 1.0), runs, 1.0)
+    np.testing.assert_array_equal(c.std_95[1:], 0.0)
+    np.testing.assert_array_equal(c.mean_95[1:], 0.0)
+    assert c.std_95[0, 0] < c.std[0] < c.std_95[0, 1]
+
+
 def test_daddy_campaign_predict_prints_the_prediction_beside_the_runs(tmp_path, capsys):
     from daddy_sim.campaign_cli import main
     out = tmp_path / "c.jsonl"
