@@ -38,7 +38,6 @@ import time
 from dataclasses import dataclass, replace
 
 import numpy as np
-from scipy.optimize import minimize
 
 from ..da import functions as dm
 from ..da.core import DA, variables
@@ -231,6 +230,8 @@ class _EndRows:
     def least_miss(self, z0: np.ndarray, tol: float) -> EndMiss | None:
         """min 1/2 |psi|^2 under the inequalities, from z0 (SLSQP); None unless it ends at a
         first-order stationary point (``_stationary``) with the inequalities held to tol."""
+        from scipy.optimize import minimize   # (here: the import costs 0.5 s, rarely needed)
+
         def f(z):
             psi, J = self.psi(z)
             return 0.5 * float(psi @ psi), psi @ J
