@@ -345,7 +345,7 @@ def compare(prediction: Prediction, deviations_si: np.ndarray,
     Why not Student's t and the chi-square: the chi-square interval of a standard deviation
     holds for Gaussian samples only, and a closed loop's terminal deviations are not (the
     halo's: kurtosis 4-7, where a Gaussian's is 3); on heavier tails it is too narrow
-    (``test_campaign_prediction.py``: 65 % coverage where it promises 95 %)."""
+    (``test_campaign_prediction.py``: 74 % coverage where it promises 95 %)."""
     d = np.asarray(deviations_si, float)
     mean, std = d.mean(axis=0), d.std(axis=0, ddof=1)
     return Comparison(prediction.mean_si, np.sqrt(np.diag(prediction.cov_si)), mean,
@@ -355,7 +355,7 @@ def compare(prediction: Prediction, deviations_si: np.ndarray,
 
 
 def _bootstrap_95(d: np.ndarray, statistic, value: np.ndarray) -> np.ndarray:
-    """(6, 2) the BCa 95 % interval of ``statistic`` of the runs d (runs, 6), per axis; an
+    """(k, 2) the BCa 95 % interval of ``statistic`` of the runs d (runs, k), per axis; an
     axis whose runs are all equal has its value as the interval (no spread to resample)."""
     import warnings
 
