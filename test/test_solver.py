@@ -565,17 +565,17 @@ def test_three_kinds_of_infeasible_problem_are_called_infeasible_within_the_boun
 
 
 def test_an_end_the_rows_allow_is_not_called_contradicted():
-    """``contradicted_end`` on ends that can be met, where neither start meets them at once:
-    nonlinear terminal rows with a placeholder target the rows are undefined at (the orbit
-    raise's |r| = 1.5, r.v = 0, r x v = sqrt(1.5); a zero x_target, sqrt(0) raising), and a
-    keep-out sphere whose surface the target lies just outside; and the check does not fire on
-    the catalogue's cases."""
+    """``contradicted_end`` on ends that can be met: nonlinear terminal rows with a
+    placeholder target the rows are undefined at (the orbit raise's |r| = 1.5, r.v = 0,
+    r x v = sqrt(1.5); a zero x_target, sqrt(0) raising: met from x0 by the least squares), a
+    keep-out sphere whose surface the target lies 0.1 mm outside, and the catalogue's cases;
+    and on one that cannot, the target 0.1 inside a keep-out sphere of radius 0.3: the least
+    miss 0.2, at a final state on the sphere."""
     from daddy_core.solver.infeasibility import _EndRows
     raise_ = _orbit_raise_problem(12)
     assert contradicted_end(raise_, SolverOptions()) is None
     near = double_integrator(g_path=lambda x, u: dm.stack(
-        [0.09 - ((x[0] - 1.3001) ** 2 + x[1] ** 2 + x[2] ** 2)]), x_target=np.array(
-            [1.0, 0, 0, 0, 0, 0]))
+        [0.09 - ((x[0] - 1.3001) ** 2 + x[1] ** 2 + x[2] ** 2)]))
     assert contradicted_end(near, SolverOptions()) is None
     shifted = double_integrator(g_path=lambda x, u: dm.stack(
         [0.09 - ((x[0] - 1.1) ** 2 + x[1] ** 2 + x[2] ** 2)]))   # the target 0.1 inside
