@@ -21,8 +21,8 @@ weighted like the laws' (``policy.correction_scale``), that moves the terminal s
 predicted from the estimate e + nu with those corrections onto that aim. Every stage's thrust
 stays within the rating (a convex programme per draw, ``thrust_balls``), climbing the
 node's thrust-margin ladder from the rung the plan in force keeps to; a draw whose rows the
-full rating cannot meet gets the node's best effort: the velocity met, the position as near
-as it comes (``_Targeting._best_effort``). The
+full rating cannot meet gets the node's best effort: its rows as near as they come together,
+in the normalised units the node's solver weighs them in (``_Targeting._best_effort``). The
 projection and the rating are why the terminal dispersion is not a Gaussian of the errors
 and is sampled (``samples`` draws of every error), not propagated as a covariance. Drift
 re-plans are not modelled: to first order a re-plan and the next law null the same predicted
@@ -263,17 +263,14 @@ class _Targeting:
 
     def _best_effort(self, rows: np.ndarray, kept: np.ndarray) -> np.ndarray:
         """(S, 3 * stages) the change of a re-plan whose rows (S, 6) the rating cannot meet:
-        the velocity's rows met if they can be, the position's then as near as they come (least
-        squares); else the velocity's as near as they come. The node's best-effort plans do
-        this (docs/design-notes.md, the model's best effort)."""
+        the rows as near as they come together, least squares in the problem's normalised
+        units (position in LU, velocity in VU: 375 m weigh as 1 mm/s on the halo), every
+        stage within the rating. The node's best-effort plan is its solver's least-violation
+        point, min 1/2 |psi|^2 of the same rows (``solver.infeasibility``; docs/design-notes.md,
+        the model's best effort)."""
         balls, rating = self.balls, self.rating
-        d = np.zeros_like(kept)
-        step, met = balls.least_change(self.M[3:6], rows[:, 3:6], kept, rating)
-        d[met] = balls.nearest(self.M[:3], rows[met, :3], self.M[3:6], rows[met, 3:6],
-                               step[met], kept[met], rating)
-        inside = balls.within(kept[~met], rating) - kept[~met]
-        d[~met] = balls.nearest(self.M[3:6], rows[~met, 3:6], self.M[:0], rows[~met, :0],
-                                inside, kept[~met], rating)
+        inside = balls.within(kept, rating) - kept
+        d = balls.nearest(self.M, rows, self.M[:0], rows[:, :0], inside, kept, rating)
         return balls.within(kept + d, rating) - kept   # (the barrier's ball is 1e-6 wider)
 
     def _clipped(self, c: np.ndarray) -> np.ndarray:
