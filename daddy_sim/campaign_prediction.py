@@ -270,7 +270,7 @@ class _Targeting:
         the model's best effort)."""
         balls, rating = self.balls, self.rating
         inside = balls.within(kept, rating) - kept
-        d = balls.nearest(self.M, rows, self.M[:0], rows[:, :0], inside, kept, rating)
+        d = balls.nearest(self.M, rows, inside, kept, rating)
         return balls.within(kept + d, rating) - kept   # (the barrier's ball is 1e-6 wider)
 
     def _clipped(self, c: np.ndarray) -> np.ndarray:

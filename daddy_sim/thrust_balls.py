@@ -108,24 +108,21 @@ class ThrustBalls:
             lam[i] += alpha[:, None] * step
         return d, met
 
-    def nearest(self, A: np.ndarray, b: np.ndarray, E: np.ndarray, e: np.ndarray,
-                start: np.ndarray, kept: np.ndarray, rating: float,
-                gap: float = 1e-4) -> np.ndarray:
-        """(S, 3 * stages) the change d to the corrections kept (S, 3 * stages) that keeps the
-        rows d E^T = e (S, m; m may be 0) and brings the rows d A^T nearest to b (S, rows),
-        least squares, with every stage's thrust within the rating, from a change ``start``
-        that meets the rows and the rating. A convex programme per draw, solved for all at once
-        by a barrier method on the rows' null space (Boyd & Vandenberghe 2004, sections 9.5
-        and 11.3: Newton steps from 0.99 of the longest step inside the balls, backtracking;
-        the objective's weight raised twentyfold from a gap of 1 % of the start's squared miss
+    def nearest(self, A: np.ndarray, b: np.ndarray, start: np.ndarray, kept: np.ndarray,
+                rating: float, gap: float = 1e-4) -> np.ndarray:
+        """(S, 3 * stages) the change d to the corrections kept (S, 3 * stages) that brings the
+        rows d A^T nearest to b (S, rows), least squares, with every stage's thrust within the
+        rating, from a change ``start`` within the rating. A convex programme per draw, solved
+        for all at once by a barrier method (Boyd & Vandenberghe 2004, sections 9.5 and 11.3:
+        Newton steps from 0.99 of the longest step inside the balls, backtracking; the
+        objective's weight raised twentyfold from a gap of 1 % of the start's squared miss
         until the barrier's duality gap is below ``gap`` of it)."""
         S, n = start.shape
         if not S:
             return start
         stages = n // NU
-        null = np.linalg.svd(E)[2][len(E):].T if len(E) else np.eye(n)   # (n, k)
-        P = A @ null                                               # (rows, k)
-        G = (null.T * self.scale).reshape(-1, stages, NU)          # (k, stages, 3) thrust / y
+        P = A                                                      # (rows, k): y = d, k = n
+        G = (np.eye(n) * self.scale).reshape(-1, stages, NU)       # (k, stages, 3) thrust / y
         GG = np.einsum("kjc,ljc->jkl", G, G).reshape(stages, -1)   # (stages, k * k)
         k = len(G)
         u0 = self.thrust_of(kept + start)
@@ -188,5 +185,5 @@ class ThrustBalls:
                 value[i[moved]] = trial[moved]
                 todo = i[moved & (decrement > 1e-8)]
             if stages / t <= gap:      # the duality gap of the centred point
-                return start + y @ null.T
+                return start + y
             t *= 20.0
