@@ -136,13 +136,20 @@ def arrival_constraints(problem: Problem, tolerance_m: float, units: Units,
     if not tolerance_m or gt is None or gt.shape != (6,) or problem.time_index is not None:
         return problem   # (an Earth-centred arrival is an orbit, not a position)
     R = float(units.length(tolerance_m))
-    weight = float(units.speed(ARRIVAL_SPEED_SCALE_M_S)) / R
+    weight = arrival_weight(units, R)
     aim = arrival_aim(problem, U, R)
 
     def arrival_rows(x, xt):
         return dm.concatenate([(x[:3] - aim) * weight, x[3:6] - xt[3:6]])
 
     return replace(problem, g_teq=arrival_rows)
+
+
+def arrival_weight(units: Units, radius: float) -> float:
+    """The weight of the arrival phase's position rows (``arrival_constraints``): 1 cm/s in
+    normalised speed units per ``radius`` (the tolerance, normalised length), per normalised
+    length."""
+    return float(units.speed(ARRIVAL_SPEED_SCALE_M_S)) / radius
 
 
 def arrival_aim(problem: Problem, U: np.ndarray, radius: float) -> np.ndarray:

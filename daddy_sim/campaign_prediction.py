@@ -20,9 +20,10 @@ on the node's own stages (the plan in force's, split into ``shift.MIN_STAGES_LEF
 weighted like the laws' (``policy.correction_scale``), that moves the terminal state
 predicted from the estimate e + nu with those corrections onto that aim. Every stage's thrust
 stays within the rating (a convex programme per draw, ``thrust_balls``), climbing the
-node's thrust-margin ladder from the rung the plan in force keeps to; a draw whose rows the
-full rating cannot meet gets the node's best effort: its rows as near as they come together,
-in the normalised units the node's solver weighs them in (``_Targeting._best_effort``). The
+node's thrust-margin ladder from the rung the plan in force keeps to; a draw whose rows a
+rung cannot meet gets the node's best effort there: its rows as near as they come together,
+weighted as the node's arrival rows weigh them (``shift.arrival_weight``), and the node's
+rules decide which rung's is flown, if any (``_Targeting._ladder``). The
 projection and the rating are why the terminal dispersion is not a Gaussian of the errors
 and is sampled (``samples`` draws of every error), not propagated as a covariance. Drift
 re-plans are not modelled: to first order a re-plan and the next law null the same predicted
@@ -39,8 +40,8 @@ from daddy_core.da.core import variables
 from daddy_core.integrators import rk78
 from daddy_core.policy import correction_scale, tracking_policy
 
-from daddy_ros.replan_policy import lowest_rung
-from daddy_ros.shift import MIN_STAGES_LEFT, split_stages
+from daddy_ros.replan_policy import LADDER_MIN_GAIN, lowest_rung
+from daddy_ros.shift import MIN_STAGES_LEFT, arrival_weight, split_stages
 from .campaigns import CampaignConfig
 from .closed_loop import flight_steps, nominal_planner
 from .sim import T0_S
@@ -233,6 +234,7 @@ class _Targeting:
         self.balls = ThrustBalls(self.thrust, self.scale)
         self.ratings = flight.ratings
         self.rating = float(self.ratings[-1])
+        self.units = flight.units
 
     def __call__(self, seen: np.ndarray, radius: float, held: np.ndarray) -> np.ndarray:
         """(S, stages, 3) the corrections from the seen deviations (S, 7) and the corrections
@@ -244,16 +246,35 @@ class _Targeting:
         r = np.linalg.norm(predicted[:, :3], axis=1, keepdims=True)   # ... brought onto the
         goal[:, :3] = predicted[:, :3] * np.minimum(1.0, radius / np.maximum(r, 1e-300))  # ball
         rows = goal - predicted
-        c, fits = kept.copy(), np.zeros(len(kept), bool)
+        return self._clipped(kept + self._ladder(rows, kept, self._weights(radius)))
+
+    def _ladder(self, rows: np.ndarray, kept: np.ndarray, w: np.ndarray) -> np.ndarray:
+        """(S, 3 * stages) the change to the corrections kept (S, 3 * stages) of a re-plan
+        whose terminal rows (S, 6) are weighted by w (6,), as the node's re-plan makes it
+        (``GuidancePlanner._climb`` and ``_adopt``): the least change within the rating of the
+        first rung of the margin ladder, from the one the plan in force keeps to, that meets
+        the rows; out of reach, each rung's best effort, a higher rung's kept where it misses
+        less and the climb stopped where it missed more than ``LADDER_MIN_GAIN`` of the one
+        below; that best effort replaces the corrections in force only where it misses less
+        than they do (the largest weighted row), else they are kept."""
+        S = len(kept)
+        change, fits, stopped = np.zeros_like(kept), np.zeros(S, bool), np.zeros(S, bool)
+        best, miss = np.zeros_like(kept), np.full(S, np.inf)   # the best effort so far
         rung = self._rung(kept)
-        for k, rating in enumerate(self.ratings):     # the margin ladder, from the plan's rung
-            todo = np.flatnonzero(~fits & (rung <= k))
+        for k, rating in enumerate(self.ratings):
+            todo = np.flatnonzero(~fits & ~stopped & (rung <= k))
             step, met = self.balls.least_change(self.M, rows[todo], kept[todo], rating)
-            c[todo[met]] += step[met]
+            change[todo[met]] = step[met]
             fits[todo[met]] = True
-        out = np.flatnonzero(~fits)   # out of reach at the full rating: the node's best effort
-        c[out] += self._best_effort(rows[out], kept[out])
-        return self._clipped(c)
+            short = todo[~met]
+            d, m = self._best_effort(rows[short], kept[short], rating, w)
+            better = m < miss[short]
+            stopped[short] = better & (m > LADDER_MIN_GAIN * miss[short])
+            best[short[better]], miss[short[better]] = d[better], m[better]
+        out = np.flatnonzero(~fits)
+        adopt = out[miss[out] < np.max(np.abs(rows[out] * w), axis=1)]
+        change[adopt] = best[adopt]
+        return change
 
     def _rung(self, kept: np.ndarray) -> np.ndarray:
         """(S,) the lowest rung of the margin ladder whose rating the plan in force (the
@@ -261,17 +282,27 @@ class _Targeting:
         peak = np.linalg.norm(self.balls.thrust_of(kept), axis=2).max(axis=1, initial=0.0)
         return lowest_rung(peak, self.ratings)
 
-    def _best_effort(self, rows: np.ndarray, kept: np.ndarray) -> np.ndarray:
-        """(S, 3 * stages) the change of a re-plan whose rows (S, 6) the rating cannot meet:
-        the rows as near as they come together, least squares in the problem's normalised
-        units (position in LU, velocity in VU: 375 m weigh as 1 mm/s on the halo), every
-        stage within the rating. The node's best-effort plan is its solver's least-violation
-        point, min 1/2 |psi|^2 of the same rows (``solver.infeasibility``; docs/design-notes.md,
-        the model's best effort)."""
-        balls, rating = self.balls, self.rating
+    def _weights(self, radius: float) -> np.ndarray:
+        """(6,) the weights of the terminal rows as the node's re-plan states them: position
+        rows x ``shift.arrival_weight`` in the arrival phase (radius > 0), velocity rows 1."""
+        w = np.ones(6)
+        if radius > 0:
+            w[:3] = arrival_weight(self.units, radius)
+        return w
+
+    def _best_effort(self, rows: np.ndarray, kept: np.ndarray, rating: float,
+                     w: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """The change (S, 3 * stages) of a re-plan whose rows (S, 6) ``rating`` cannot meet,
+        and its miss (S,): the rows as near as they come together -- least squares of the
+        rows weighted by w (S, 6) as the node's terminal constraints weigh them, every stage
+        within the rating -- and the largest weighted row left. The node's best-effort plan
+        is its solver's least-violation point, min 1/2 |psi|^2 of the same rows
+        (``solver.infeasibility``; docs/design-notes.md, the model's best effort)."""
+        balls = self.balls
         inside = balls.within(kept, rating) - kept
-        d = balls.nearest(self.M, rows, inside, kept, rating)
-        return balls.within(kept + d, rating) - kept   # (the barrier's ball is 1e-6 wider)
+        d = balls.nearest(self.M * w[:, None], rows * w, inside, kept, rating)
+        d = balls.within(kept + d, rating) - kept   # (the barrier's ball is 1e-6 wider)
+        return d, np.max(np.abs((rows - d @ self.M.T) * w), axis=1)
 
     def _clipped(self, c: np.ndarray) -> np.ndarray:
         """(S, stages, 3) the thrust changes, a thrust past the rating scaled back onto it."""

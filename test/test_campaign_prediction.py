@@ -4,6 +4,7 @@ prints it beside a results file's runs."""
 import json
 
 import numpy as np
+import pytest
 
 from daddy_sim.campaign_prediction import compare, predict
 from daddy_sim.campaigns import CampaignConfig, Dispersion
@@ -169,11 +170,14 @@ def test_an_arrival_re_plans_correction_is_the_least_within_the_thrust_rating():
 def test_a_re_plan_out_of_reach_comes_as_near_as_the_rating_lets_it():
     """The model's best effort (``_Targeting._best_effort``), as the node's best-effort plan
     (its solver's least-violation point): terminal changes the rating cannot meet get the least
-    squares of all six rows in normalised units within the rating -- all but 1 % of the way
-    from the start (the plan's thrust within the rating) to SLSQP's optimum of the same
-    problem, the barrier's gap -- and every stage's thrust within the rating."""
+    squares of all six rows weighted as the node's arrival rows weigh them (the position by
+    ``shift.arrival_weight``) within the rating -- all but 1 % of the way from the start (the
+    plan's thrust within the rating) to SLSQP's optimum of the same problem, the barrier's
+    gap --, every stage's thrust within the rating, and its miss the largest weighted row."""
     from scipy.optimize import minimize
     T, thrust = _last_stages_targeting()
+    w = _arrival_weights(T)
+    assert w[0] > 10.0          # (300 m weigh as 1 cm/s: the position far heavier than in LU)
     rng = np.random.default_rng(5)
     n = T.M.shape[1]
     # 0.5 % more thrust along the nominal's (within reach), 40 % (out of it), and position
@@ -183,11 +187,12 @@ def test_a_re_plan_out_of_reach_comes_as_near_as_the_rating_lets_it():
     kept = np.zeros((3, n))
     _, met = T.balls.least_change(T.M[:6], rows, kept, T.rating)
     assert list(met) == [True, False, False]
-    d = T._best_effort(rows[1:], kept[1:])
+    d, miss = T._best_effort(rows[1:], kept[1:], T.rating, w)
     rated = {"type": "ineq", "fun": lambda x: T.rating - thrust(x)}
-    for i, b in enumerate(rows[1:]):
+    A = T.M[:6] * w[:, None]
+    for i, b in enumerate(rows[1:] * w):
         assert thrust(d[i]).max() <= T.rating * (1 + 1e-9)
-        A = T.M[:6]
+        assert miss[i] == pytest.approx(np.abs(A @ d[i] - b).max(), rel=1e-12)
         ref = minimize(lambda x: np.sum((A @ x - b) ** 2), d[i] * 0.5, method="SLSQP",
                        jac=lambda x: 2 * A.T @ (A @ x - b), constraints=[rated],
                        options=dict(ftol=1e-16, maxiter=1000))
@@ -196,6 +201,64 @@ def test_a_re_plan_out_of_reach_comes_as_near_as_the_rating_lets_it():
         first = np.linalg.norm(A @ start - b)
         assert theirs > 1e-3 * np.linalg.norm(b)                 # out of reach indeed
         assert ours - theirs <= 1e-2 * (first - theirs), (i, first, ours, theirs)
+
+
+def test_the_models_ladder_climbs_and_adopts_as_the_node_does():
+    """``_Targeting._ladder`` against the node's rules written out draw by draw as
+    ``GuidancePlanner._climb`` and ``_adopt`` state them: out of reach, each rung's best
+    effort; a higher rung's taken where it misses less, the climb stopped where it missed more
+    than LADDER_MIN_GAIN of the one below; the result flown only where it misses less than the
+    corrections in force (largest weighted row), which are kept otherwise. Draws with
+    corrections in force of several sizes, so that some start on higher rungs; every draw is
+    out of reach at every rung, and each rule decides some of them."""
+    from daddy_ros.replan_policy import LADDER_MIN_GAIN
+    T, thrust = _last_stages_targeting()
+    w = _arrival_weights(T)
+    rng = np.random.default_rng(11)
+    n, S = T.M.shape[1], 40
+    unit = T.thrust / T.scale
+    kept = np.outer(rng.uniform(-0.05, 0.05, S), unit) + rng.normal(size=(S, n)) * 1e-3
+    wanted = np.outer(rng.uniform(0.3, 0.6, S), unit) + rng.normal(size=(S, n)) * 0.3
+    rows = wanted @ T.M[:6].T
+    rows[:, :3] *= rng.uniform(0.0, 0.2, (S, 1))     # positions from near the aim to far
+    # half the draws fly a best effort already (as the last re-plans of a flight out of
+    # reach): their rows are its residual, seen again with a navigation error
+    h = S // 2
+    d, _ = T._best_effort(rows[h:], kept[h:], T.rating, w)
+    kept[h:] += d
+    rows[h:] = (rows[h:] - d @ T.M[:6].T) * (1 + rng.normal(size=(S - h, 6)) * 0.02)
+    change = T._ladder(rows, kept, w)
+    stops = adopted = refused = 0
+    for i in range(S):
+        best = None
+        for k in range(int(T._rung(kept[i:i + 1])[0]), len(T.ratings)):
+            _, met = T.balls.least_change(T.M, rows[i:i + 1], kept[i:i + 1], T.ratings[k])
+            assert not met[0]
+            d, m = T._best_effort(rows[i:i + 1], kept[i:i + 1], T.ratings[k], w)
+            if best is None:
+                best = (d[0], m[0])
+            elif m[0] < best[1]:
+                stalled = m[0] > LADDER_MIN_GAIN * best[1]
+                best = (d[0], m[0])
+                if stalled:
+                    stops += k + 1 < len(T.ratings)
+                    break
+        in_force = np.abs(rows[i] * w).max()
+        expected = best[0] if best[1] < in_force else np.zeros(n)
+        adopted += best[1] < in_force
+        refused += best[1] >= in_force
+        # (the draws solved together or alone: the same barrier path, to its round-off)
+        assert np.abs(change[i] - expected).max() <= 1e-6 * np.abs(best[0]).max(), i
+        # whatever it flies never misses more than the corrections in force
+        assert np.abs((rows[i] - change[i] @ T.M[:6].T) * w).max() <= in_force
+        assert thrust(kept[i] + change[i]).max() <= T.rating * (1 + 1e-9)
+    assert adopted and refused and stops, (adopted, refused, stops)
+
+
+def _arrival_weights(T):
+    """(6,) the node's arrival-row weights for the campaign's tolerance."""
+    config = CampaignConfig()
+    return T._weights(float(T.units.length(config.guidance.arrival_tolerance_m)))
 
 
 def _last_stages_targeting():
