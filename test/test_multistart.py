@@ -202,3 +202,40 @@ def test_a_blend_the_dynamics_cannot_fly_is_none(error):
             raise error
         return p.step(x, u, dt)
     assert blended_states(Problem(**{**p.__dict__, "step": step})) is None
+
+
+def test_a_restart_that_would_repeat_its_solve_stops_where_the_blend_is_not_restored():
+    """``blend.restart_from_blend`` after a solve from the paper's cold guess (or zero
+    thrust, the same start): where the blend is not restored, the restart would fly on from
+    that same rollout and repeat the solve, so it stops there (``UnrestoredStates.STOP``);
+    after a solve from another guess it goes on from the controls as before. A solve told to
+    stop at an unrestored state guess ends at once, unconverged, its reason naming the
+    option; the double integrator with too weak a thrust (not restorable) is still called
+    infeasible."""
+    from daddy_core.catalogue.infeasible import INFEASIBLE, double_integrator
+    from daddy_core.solver.blend import PAPER_GUESS, restart_from_blend
+    from daddy_core.solver.options import UnrestoredStates
+    p = double_integrator(**INFEASIBLE["thrust too weak for the time"][0])
+    first = solve(p, np.zeros((p.N, p.nu)),
+                  options=SolverOptions().with_(end_game=dict(blend_restart=False,
+                                                              certify_infeasibility=False)))
+    assert not first.converged
+    seen = []
+
+    def spy(problem, guess, o):
+        seen.append(o.start.unrestored_states)
+        return solve(problem, guess, options=o)
+    for guess, expected in ((np.zeros((p.N, p.nu)), UnrestoredStates.STOP),
+                            (np.full((p.N, p.nu), PAPER_GUESS), UnrestoredStates.STOP),
+                            (np.full((p.N, p.nu), 0.3), UnrestoredStates.FROM_CONTROLS)):
+        seen.clear()
+        assert restart_from_blend(p, first, SolverOptions(), spy, None, guess) is None
+        assert seen == [expected]
+    blend = WarmStart(U=np.full((p.N, p.nu), PAPER_GUESS), X=blended_states(p))
+    stop = SolverOptions().with_(start=dict(unrestored_states="stop"),
+                                 end_game=dict(blend_restart=False))
+    sol = solve(p, blend, options=stop)
+    assert not sol.converged and "start.unrestored_states" in sol.reason
+    assert solve(p, np.zeros((p.N, p.nu))).infeasible
+    with pytest.raises(DaddyError, match="unrestored_states"):
+        SolverOptions().with_(start=dict(unrestored_states="sometimes"))

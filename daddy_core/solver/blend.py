@@ -25,8 +25,9 @@ import numpy as np
 from ..errors import DaddyError
 from ..problem import Problem
 from .infeasibility import unmet
-from .options import SolverOptions
+from .options import SolverOptions, UnrestoredStates
 from .solution import Solution, WarmStart
+from .start import same_start
 
 PAPER_GUESS = 1e-6   # the paper's cold guess on every control component (``solve``'s default)
 # A feasible end with a KKT residual (relative to the largest cost-gradient component) above
@@ -77,18 +78,27 @@ def worth_restarting(sol: Solution, opts: SolverOptions, out_of_time: bool) -> b
 
 
 def restart_from_blend(problem: Problem, sol: Solution, opts: SolverOptions, solve_again,
-                       remaining_s: float | None) -> Solution | None:
+                       remaining_s: float | None,
+                       first: np.ndarray | None = None) -> Solution | None:
     """The solve from the blended states (module docstring) when it converged, else None.
     ``solve_again(p, guess, options)``: the caller's solve; ``remaining_s``: what is left of
-    the time budget (None: unbounded)."""
+    the time budget (None: unbounded); ``first``: (N, nu) the controls the solve that ended
+    unconverged started from, if known. Where the blend is not restored the restart would go
+    on from the rollout of the paper's cold guess; when that is where the first solve started
+    (``start.same_start``) it stops there instead (``UnrestoredStates.STOP``): it would repeat
+    that solve."""
     if remaining_s is not None and remaining_s <= 0.0:
         return None
     X = blended_states(problem)
     if X is None:
         return None
-    o = opts.with_(run=dict(time_budget_s=remaining_s),
-                   end_game=dict(blend_restart=False, certify_infeasibility=False))
     cold = np.full((problem.N, problem.nu), PAPER_GUESS)
+    repeat = first is not None and same_start(problem, problem.rollout(first),
+                                                 problem.rollout(cold))
+    o = opts.with_(run=dict(time_budget_s=remaining_s),
+                   end_game=dict(blend_restart=False, certify_infeasibility=False),
+                   start=dict(unrestored_states=UnrestoredStates.STOP if repeat
+                              else opts.start.unrestored_states))
     again = solve_again(problem, WarmStart(U=cold, X=X), o)
     if not again.converged:
         return None

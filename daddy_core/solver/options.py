@@ -62,6 +62,17 @@ class Globalization(Enum):
     TRUST_REGION = "trust_region"
 
 
+class UnrestoredStates(Enum):
+    """Where a solve goes from a state guess (``WarmStart.X``) its restoration could not make
+    feasible: FROM_CONTROLS, DDP from the rollout of the guess's controls (what a solve given
+    only those controls would do); STOP, the solve ends there unconverged -- for a caller to
+    whom that rollout is nothing new (``blend.restart_from_blend`` after a solve from the
+    same controls: the rest would repeat it)."""
+
+    FROM_CONTROLS = "from_controls"
+    STOP = "stop"
+
+
 class MultiplierUpdate(Enum):
     """How the AUL moves its multipliers: after each DDP solve, eq. 9's first-order step
     lam + mu g, or the second-order one of HDDP and DA-HDDP (``multiplier_update``: the
@@ -78,7 +89,8 @@ def _check(group: object, prefix: str) -> None:
     """Every number of an options group non-negative and not NaN (DaddyError naming it)."""
     for f in fields(group):
         v = getattr(group, f.name)
-        if f.type in ("bool", "Globalization", "MultiplierUpdate") or isinstance(v, bool):
+        if f.type in ("bool", "Globalization", "MultiplierUpdate", "UnrestoredStates") \
+                or isinstance(v, bool):
             continue
         if not isinstance(v, (int, float)) or v != v or v < 0:
             raise DaddyError(f"options.{prefix}.{f.name} must be a non-negative number, got {v!r}")
@@ -204,9 +216,19 @@ class StartOptions(_Group):
     """Where DDP starts (``start``)."""
 
     restore: bool = True              # drive any guess to feasibility with Newton before DDP
+    # a state guess the restoration could not make feasible: DDP from the guess's controls, or stop
+    unrestored_states: UnrestoredStates = UnrestoredStates.FROM_CONTROLS
 
     def __post_init__(self):
         _check(self, "start")
+        if not isinstance(self.unrestored_states, UnrestoredStates):
+            try:
+                object.__setattr__(self, "unrestored_states",
+                                   UnrestoredStates(self.unrestored_states))
+            except ValueError:
+                raise DaddyError(f"options.start.unrestored_states must be one of "
+                                 f"{[m.value for m in UnrestoredStates]}, got "
+                                 f"{self.unrestored_states!r}") from None
 
 
 @dataclass(frozen=True)

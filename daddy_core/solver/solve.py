@@ -29,7 +29,7 @@ from .context import Clock, SolveContext
 from .deadline import CancelFlag
 from .exact_start import exact_opening, exact_start_wanted
 from .homotopy import homotopy_steps
-from .options import Method, SolverOptions
+from .options import Method, SolverOptions, UnrestoredStates
 from .solution import Solution, WarmStart
 from .start import start
 
@@ -133,7 +133,12 @@ def _solve(problem: Problem, u_guess, method, fuel_optimal, polish, options, cas
             return replace(unsolved(p, U0, why, ctx.steps, method, case_name), infeasible=True)
         game = exact_opening(ctx, U0, warm) if exact_start_wanted(ctx) else None
         if game is None:
-            game = end_game.opening(ctx, start(ctx, U0, warm), warm.duals)
+            st = start(ctx, U0, warm)
+            if st.states_lost and o.start.unrestored_states is UnrestoredStates.STOP:
+                return unsolved(p, U0, "the state guess was not restored, and the options "
+                                "stop there (start.unrestored_states)", ctx.steps, method,
+                                case_name)
+            game = end_game.opening(ctx, st, warm.duals)
         return solution(ctx, end_game.play(ctx, game), case_name)
 
     clock = Clock(opts.run.time_budget_s, cancel=cancel)
@@ -153,7 +158,8 @@ def _solve(problem: Problem, u_guess, method, fuel_optimal, polish, options, cas
             progress(f"  unconverged (max violation {sol.max_violation:.2e}): solved again "
                      "from the blended states")
         again = restart_from_blend(problem, sol, opts, lambda p, guess, o: _solve(
-            p, guess, method, fuel_optimal, polish, o, case_name, progress, cancel), remaining())
+            p, guess, method, fuel_optimal, polish, o, case_name, progress, cancel), remaining(),
+            _start_controls(problem, u_guess))
         if again is not None:
             return again
     if not infeasibility.wanted(sol, opts, clock.out_of_time()):
@@ -163,6 +169,13 @@ def _solve(problem: Problem, u_guess, method, fuel_optimal, polish, options, cas
                  "asks whether any trajectory meets them")
     return infeasibility.certify(problem, sol, opts, lambda p, U0, o: _solve(
         p, U0, method, False, polish, o, case_name, progress, cancel), remaining())
+
+
+def _start_controls(problem: Problem, guess) -> np.ndarray:
+    """(N, nu) the controls a solve of ``problem`` from ``guess`` starts from (the paper's
+    cold guess for None)."""
+    U = WarmStart.of(guess, problem.stage_dt, False, problem.t_start).U
+    return np.full((problem.N, problem.nu), PAPER_GUESS) if U is None else np.asarray(U, float)
 
 
 def _state_guess(guess) -> bool:

@@ -21,12 +21,14 @@ class Start:
     """The iterate the homotopy starts from (after the restoration, if any).
 
     X: (N+1, nx), U: (N, nu); restored: a converged restoration of the problem itself (a
-    feasible iterate to fall back on); F: DA stage maps at (X, U), if known."""
+    feasible iterate to fall back on); F: DA stage maps at (X, U), if known; states_lost: a
+    state guess was given and not restored (X is the rollout of U instead)."""
 
     X: np.ndarray
     U: np.ndarray
     restored: newton.NewtonResult | None = None
     F: object = None
+    states_lost: bool = False
 
 
 def start(ctx: SolveContext, U0: np.ndarray, warm: WarmStart) -> Start:
@@ -96,6 +98,8 @@ def _restored(ctx: SolveContext, X, U0, maps, cold: bool, reach: float,
         st.X = maps.rollout(problem, U0)[0]   # DDP starts from a consistent trajectory
     elif states is None:   # DDP starts from the guess, where Newton's first model expanded it
         st.F = res.start_F
+    else:
+        st.states_lost = True
     ctx.say(f"start {'restored' if res.converged else 'not restored'} by Newton"
             f"{' (without g_path)' if relaxed else ''}: {res.iterations} iterations, max "
             f"violation {res.max_violation:.2e} ({res.reason})")
@@ -121,6 +125,14 @@ def _restore(ctx: SolveContext, problem: Problem, X, U0, maps,
 _SAME_START_RTOL = 1e-2
 
 
+def same_start(problem: Problem, X: np.ndarray, Y: np.ndarray) -> bool:
+    """Two trajectories (N+1, nx) of ``problem`` within ``_SAME_START_RTOL`` of the states'
+    size (the largest |x| of X and of the target) of each other: the same start as far as
+    the restoration can tell."""
+    size = max(float(np.max(np.abs(X))), float(np.max(np.abs(problem.x_target))))
+    return bool(np.max(np.abs(Y - X)) <= _SAME_START_RTOL * size)
+
+
 def _restore_ballistic(ctx: SolveContext, problem: Problem, X, U0,
                        stalled: newton.NewtonResult) -> newton.NewtonResult | None:
     """Newton's restoration of the ballistic trajectory (zero control) for a cold guess (X, U0)
@@ -128,8 +140,7 @@ def _restore_ballistic(ctx: SolveContext, problem: Problem, X, U0,
     stays near the departure orbit where a thrusting guess left the model poor (design notes)."""
     Ub = np.zeros_like(U0)
     Xb = problem.rollout(Ub)
-    if (not np.all(np.isfinite(Xb))
-            or np.max(np.abs(Xb - X)) <= _SAME_START_RTOL * np.max(np.abs(X))):
+    if not np.all(np.isfinite(Xb)) or same_start(problem, X, Xb):
         return None
     res = newton.polish(problem, Xb, Ub, ctx.opts, ctx.clock.deadline)
     ctx.say(f"guess not restored ({stalled.reason}); ballistic start: {res.iterations} "
