@@ -493,9 +493,11 @@ def test_an_infeasible_problem_fails_fast_and_names_the_constraints_it_cannot_me
     assert set(names) == {"g_ineq[0]", "g_teq[0]", "g_teq[1]"}
     assert sol.violations[0]["violation"] == pytest.approx(sol.max_violation)
     assert "largest violations: g_teq[0]" in sol.reason
-    # the augmented Lagrangian says it stalled (penalty at its cap, violation not falling)
-    # instead of running its aul_max_iter iterations, and the polishing stops as fast
-    assert "stalled with the penalty at mu_max" in sol.reason
+    # the augmented Lagrangian says it stalled (the violation unmoved while the penalty grew,
+    # or not falling with the penalty at its cap) instead of running its aul_max_iter
+    # iterations, and the polishing stops as fast
+    assert ("unmoved while the penalty grew" in sol.reason
+            or "stalled with the penalty at mu_max" in sol.reason)
     assert sol.iterations["aul"] < SolverOptions().aul.max_iter
     # (by its stall or no-descent rule, far from its newton_max_iter), and so does the
     # restoration of the start (SolverOptions.start.restore), which DDP then does without
@@ -1313,3 +1315,25 @@ def test_a_drift_check_whose_flows_do_not_integrate_keeps_the_nominal():
     st.problem = replace(prob, step=singular)
     st.radius, st.walked = np.zeros(prob.N), np.ones(prob.N)   # (linear maps: radius inf)
     assert without_drift(st, SolverOptions(), None) is st
+
+
+def test_a_violation_the_growing_penalty_does_not_move_stalls_before_the_cap():
+    """``aul_safeguards.unmoved``: the last aul_stall_iter + 1 max violations within 1 % of
+    each other, far above tol_aul (10x), stall the augmented Lagrangian whatever its penalty;
+    a violation still falling, a plateau near the tolerance (Newton's to finish), too short a
+    history, or the stall rules switched off (aul_stall_iter = 0, the node's warm re-plans) do
+    not. On the weak-thrust double integrator the solve stalls so before the cap and is still
+    called infeasible."""
+    from daddy_core.solver.aul_safeguards import unmoved
+    opts = SolverOptions()
+    tol = opts.aul.tol
+    assert unmoved([0.5, 0.287, 0.2871, 0.2869, 0.287], opts)
+    assert not unmoved([0.5, 0.30, 0.29, 0.28, 0.27], opts)            # still falling (10 %)
+    assert not unmoved([5 * tol] * 5, opts)                             # near the tolerance
+    assert unmoved([20 * tol] * 4, opts)
+    assert not unmoved([0.287] * 3, opts)                               # too short
+    assert not unmoved([0.287] * 6, opts.with_(aul=dict(stall_iter=0)))
+    p = double_integrator(**INFEASIBLE["thrust too weak for the time"][0])
+    sol = solve(p, np.zeros((p.N, p.nu)))
+    assert sol.infeasible and "unmoved while the penalty grew" in sol.reason
+

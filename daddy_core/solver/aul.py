@@ -98,6 +98,8 @@ def aul(st: Stages, method: Method, opts: SolverOptions, stats: DDPStats,
             capped = capped + 1 if safe.at_cap(mult, opts) else 0   # this solve's penalty
             if safe.stalled(history, capped, opts):
                 status = Status.AUL_STALLED
+            elif safe.unmoved(history, opts):
+                status = Status.AUL_UNMOVED
         if status is not None:
             return AULResult(status is Status.AUL_CONVERGED, it, status, st, mult, gmax,
                              rho_last, gains)

@@ -7,7 +7,8 @@ calls (the cases that needed them, the measurements and the tests: docs/design-n
   restored;
 - ``diverged``: a first DDP solve that ends far more violated than its infeasible start;
 - ``ends_feasible``: a feasible iterate whose DDP solve was cut off gets one more solve;
-- ``stalled``: the penalty at its cap without progress.
+- ``stalled``: the penalty at its cap without progress;
+- ``unmoved``: the violation unmoved while the penalty grew, far above the tolerance.
 """
 from __future__ import annotations
 
@@ -27,6 +28,10 @@ FALLBACK_RATIO_TOL = 0.5
 CUT_OFF = (Status.DDP_MAX_ITER, Status.DDP_STALLED)
 # the first DDP solve diverged when its max violation grew this many times over the start's
 DIVERGED_GROWTH = 100.0
+# the max violation is unmoved while it stays within this fraction of itself ...
+UNMOVED_RTOL = 1e-2
+# ... and counts as far above tol_aul beyond this many times it (Newton finishes nearer plateaus)
+UNMOVED_FAR = 10.0
 
 
 def fallback_options(res, opts: SolverOptions) -> SolverOptions | None:
@@ -107,3 +112,17 @@ def stalled(history: list, capped: int, opts: SolverOptions) -> bool:
     the penalty at mu_max (``capped`` solves in a row did) and the max violation fell by less
     than half over them (an infeasible problem, or a local minimiser of the violation)."""
     return opts.aul.stall_iter <= capped and not_halved(history, opts.aul.stall_iter)
+
+
+def unmoved(history: list, opts: SolverOptions) -> bool:
+    """The last ``aul_stall_iter`` + 1 max violations lie within ``UNMOVED_RTOL`` of each other
+    and above ``UNMOVED_FAR`` x tol_aul: over ``aul_stall_iter`` solves the penalty grew by
+    mu_growth at each (or sat at its cap) and moved nothing -- the DDP solves were minimising
+    a violation they could not reduce (an infeasible problem, or a local minimiser of the
+    violation). Stalled as at the cap, without climbing to it first (docs/design-notes.md)."""
+    k = opts.aul.stall_iter
+    if not 0 < k < len(history):
+        return False
+    last = history[-1 - k:]
+    return (min(last) > UNMOVED_FAR * opts.aul.tol
+            and max(last) - min(last) <= UNMOVED_RTOL * max(last))

@@ -128,7 +128,7 @@ def continuation(problem: Problem, X, U, steps: tuple, method: Method, opts: Sol
         history.append({"h": hom[0], "delta": hom[1], "aul_iterations": res.iterations,
                         "max_violation": res.max_violation, "cost": res.stages.cost,
                         "converged": res.converged, "reason": res.reason})
-        if res.status is Status.AUL_STALLED:
+        if res.status in (Status.AUL_STALLED, Status.AUL_UNMOVED):
             # the penalty can do no more: the next step goes on from here, and Newton's
             # polishing finally meets the constraints or reports that they cannot be met
             stalled = stalled or (f"homotopy step {i + 1}: {res.reason} (max violation "

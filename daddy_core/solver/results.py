@@ -26,6 +26,7 @@ class Status(Enum):
     AUL_CONVERGED = "max violation below tol_aul"
     AUL_MAX_ITER = "aul_max_iter reached"
     AUL_STALLED = "max violation stalled with the penalty at mu_max"
+    AUL_UNMOVED = "max violation unmoved while the penalty grew"
     AUL_DIVERGED = ("DDP diverged from the start: neither the line search nor the trust "
                     "region converged, and the max violation grew a hundredfold")
     # Newton
