@@ -294,10 +294,10 @@ class _Targeting:
                      w: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """The change (S, 3 * stages) of a re-plan whose rows (S, 6) ``rating`` cannot meet,
         and its miss (S,): the rows as near as they come together -- least squares of the
-        rows weighted by w (S, 6) as the node's terminal constraints weigh them, every stage
+        rows weighted by w (6,) as the node's terminal constraints weigh them, every stage
         within the rating -- and the largest weighted row left. The node's best-effort plan
-        is its solver's least-violation point, min 1/2 |psi|^2 of the same rows
-        (``solver.infeasibility``; docs/design-notes.md, the model's best effort)."""
+        is its augmented Lagrangian's stalled point, near min 1/2 |psi|^2 of the same rows
+        (docs/policies.md, the campaign prediction)."""
         balls = self.balls
         inside = balls.within(kept, rating) - kept
         d = balls.nearest(self.M * w[:, None], rows * w, inside, kept, rating)
