@@ -64,10 +64,11 @@ class Globalization(Enum):
 
 class UnrestoredStates(Enum):
     """Where a solve goes from a state guess (``WarmStart.X``) its restoration could not make
-    feasible: FROM_CONTROLS, DDP from the rollout of the guess's controls (what a solve given
-    only those controls would do); STOP, the solve ends there unconverged -- for a caller to
-    whom that rollout is nothing new (``blend.restart_from_blend`` after a solve from the
-    same controls: the rest would repeat it)."""
+    feasible: FROM_CONTROLS, the restoration's fallbacks and DDP from the rollout of the
+    guess's controls (what a solve given only those controls would do); STOP, the state guess
+    is the only start tried: the solve ends there unconverged -- for a caller to whom the
+    rest is nothing new (``blend.restart_from_blend`` after a solve from the same controls,
+    whose restoration tried the ballistic flight too: the rest would repeat it)."""
 
     FROM_CONTROLS = "from_controls"
     STOP = "stop"

@@ -13,6 +13,7 @@ from ..errors import DaddyError
 from ..problem import Problem
 from . import newton
 from .context import SolveContext
+from .options import UnrestoredStates
 from .solution import WarmStart
 
 
@@ -48,10 +49,13 @@ def start(ctx: SolveContext, U0: np.ndarray, warm: WarmStart) -> Start:
         raise DaddyError("the initial guess propagates to a non-finite state")
     if not opts.start.restore:
         return Start(X, U0)
+    states = None if maps is not None else guess_states(problem, warm.X)
+    # (a state guess that is the only start to try gets no ballistic fallback either)
+    only_states = states is not None and opts.start.unrestored_states is UnrestoredStates.STOP
     with ctx.clock.phase("restore"):
-        return _restored(ctx, X, U0, maps, cold=maps is None and warm.duals is None,
-                         reach=reach, states=None if maps is not None else guess_states(
-                             problem, warm.X))
+        return _restored(ctx, X, U0, maps,
+                         cold=maps is None and warm.duals is None and not only_states,
+                         reach=reach, states=states)
 
 
 def guess_states(problem: Problem, X) -> np.ndarray | None:
