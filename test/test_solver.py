@@ -1319,21 +1319,25 @@ def test_a_drift_check_whose_flows_do_not_integrate_keeps_the_nominal():
 
 def test_a_violation_the_growing_penalty_does_not_move_stalls_before_the_cap():
     """``aul_safeguards.unmoved``: the last aul_stall_iter + 1 max violations within 1 % of
-    each other, far above tol_aul (10x), stall the augmented Lagrangian whatever its penalty;
-    a violation still falling, a plateau near the tolerance (Newton's to finish), too short a
-    history, or the stall rules switched off (aul_stall_iter = 0, the node's warm re-plans) do
-    not. On the weak-thrust double integrator the solve stalls so before the cap and is still
-    called infeasible."""
+    each other, far above tol_aul (10x), with the penalty outweighing the cost in each of the
+    last aul_stall_iter solves, stall the augmented Lagrangian whatever its penalty; a
+    violation still falling, a plateau near the tolerance (Newton's to finish), a plateau under
+    a penalty still weaker than the cost (a LEO raise's first four solves: 8.17e-4 to 8.11e-4
+    at mu = 1 to 1e3, then falling), too short a history, or the stall rules switched off
+    (aul_stall_iter = 0, the node's warm re-plans) do not. On the weak-thrust double
+    integrator the solve stalls so before the cap and is still called infeasible."""
     from daddy_core.solver.aul_safeguards import unmoved
     opts = SolverOptions()
-    tol = opts.aul.tol
-    assert unmoved([0.5, 0.287, 0.2871, 0.2869, 0.287], opts)
-    assert not unmoved([0.5, 0.30, 0.29, 0.28, 0.27], opts)            # still falling (10 %)
-    assert not unmoved([5 * tol] * 5, opts)                             # near the tolerance
-    assert unmoved([20 * tol] * 4, opts)
-    assert not unmoved([0.287] * 3, opts)                               # too short
-    assert not unmoved([0.287] * 6, opts.with_(aul=dict(stall_iter=0)))
+    tol, strong = opts.aul.tol, [True] * 5
+    assert unmoved([0.5, 0.287, 0.2871, 0.2869, 0.287], strong, opts)
+    assert not unmoved([0.5, 0.287, 0.2871, 0.2869, 0.287], [True, True, False, True, True],
+                       opts)                                            # (a weak penalty)
+    assert not unmoved([8.17e-4, 8.17e-4, 8.16e-4, 8.11e-4], [False] * 4, opts)
+    assert not unmoved([0.5, 0.30, 0.29, 0.28, 0.27], strong, opts)     # still falling (10 %)
+    assert not unmoved([5 * tol] * 5, strong, opts)                      # near the tolerance
+    assert unmoved([20 * tol] * 4, strong[:4], opts)
+    assert not unmoved([0.287] * 3, strong[:3], opts)                    # too short
+    assert not unmoved([0.287] * 5, strong, opts.with_(aul=dict(stall_iter=0)))
     p = double_integrator(**INFEASIBLE["thrust too weak for the time"][0])
     sol = solve(p, np.zeros((p.N, p.nu)))
     assert sol.infeasible and "unmoved while the penalty grew" in sol.reason
-

@@ -68,6 +68,7 @@ def aul(st: Stages, method: Method, opts: SolverOptions, stats: DDPStats,
     gains, gmax = None, np.inf
     rho, rho_last, radius = rho0, opts.ddp.rho_init if rho0 is None else rho0, math.inf
     history, capped = [], 0   # max violation after each DDP solve; solves at mu_max in a row
+    dominated = []            # after each DDP solve: the penalty outweighed the cost
     cut_off = False           # the last DDP solve ran into ddp_max_iter at a feasible point
     for it in range(1, opts.aul.max_iter + 1):
         res, both_cut_off, opts = _ddp_solve(st, method, opts, stats, deadline, rho, radius,
@@ -95,10 +96,11 @@ def aul(st: Stages, method: Method, opts: SolverOptions, stats: DDPStats,
         else:
             cut_off = gmax <= opts.aul.tol   # (feasible and not ended: DDP hit its bound)
             history.append(gmax)
+            dominated.append(safe.penalty_dominates(st))
             capped = capped + 1 if safe.at_cap(mult, opts) else 0   # this solve's penalty
             if safe.stalled(history, capped, opts):
                 status = Status.AUL_STALLED
-            elif safe.unmoved(history, opts):
+            elif safe.unmoved(history, dominated, opts):
                 status = Status.AUL_UNMOVED
         if status is not None:
             return AULResult(status is Status.AUL_CONVERGED, it, status, st, mult, gmax,

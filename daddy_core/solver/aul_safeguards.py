@@ -8,7 +8,8 @@ calls (the cases that needed them, the measurements and the tests: docs/design-n
 - ``diverged``: a first DDP solve that ends far more violated than its infeasible start;
 - ``ends_feasible``: a feasible iterate whose DDP solve was cut off gets one more solve;
 - ``stalled``: the penalty at its cap without progress;
-- ``unmoved``: the violation unmoved while the penalty grew, far above the tolerance.
+- ``unmoved``: the violation unmoved while the growing penalty dominated the cost, far above
+  the tolerance.
 """
 from __future__ import annotations
 
@@ -17,7 +18,7 @@ import numpy as np
 from ..errors import DaddyError
 from . import newton
 from .deadline import Deadline
-from .lagrangian import Multipliers
+from .lagrangian import Multipliers, plain_cost
 from .options import Globalization, SolverOptions
 from .results import Status, not_halved
 from .sweeps import Stages
@@ -114,14 +115,25 @@ def stalled(history: list, capped: int, opts: SolverOptions) -> bool:
     return opts.aul.stall_iter <= capped and not_halved(history, opts.aul.stall_iter)
 
 
-def unmoved(history: list, opts: SolverOptions) -> bool:
-    """The last ``aul_stall_iter`` + 1 max violations lie within ``UNMOVED_RTOL`` of each other
-    and above ``UNMOVED_FAR`` x tol_aul: over ``aul_stall_iter`` solves the penalty grew by
-    mu_growth at each (or sat at its cap) and moved nothing -- the DDP solves were minimising
-    a violation they could not reduce (an infeasible problem, or a local minimiser of the
-    violation). Stalled as at the cap, without climbing to it first (docs/design-notes.md)."""
+def penalty_dominates(st: Stages) -> bool:
+    """The Lagrangian terms of the nominal's augmented cost (J~ - J: the multipliers' and the
+    penalty's) exceed the cost itself in magnitude: a DDP solve of it minimises the violation
+    more than the cost."""
+    plain = plain_cost(st.problem, st.X, st.U, st.hom)
+    return st.cost - plain > abs(plain)
+
+
+def unmoved(history: list, dominated: list, opts: SolverOptions) -> bool:
+    """The last ``aul_stall_iter`` + 1 max violations (``history``) lie within
+    ``UNMOVED_RTOL`` of each other and above ``UNMOVED_FAR`` x tol_aul, and the penalty
+    dominated each of the last ``aul_stall_iter`` solves (``dominated``, ``penalty_dominates``
+    after each): the growing penalty moved nothing -- the DDP solves were minimising a
+    violation they could not reduce (an infeasible problem, or a local minimiser of the
+    violation). Stalled as at the cap, without climbing to it first. A plateau under a penalty
+    still weaker than the cost is no stall: it moves once the penalty outweighs the cost
+    (docs/design-notes.md)."""
     k = opts.aul.stall_iter
-    if not 0 < k < len(history):
+    if not 0 < k < len(history) or not all(dominated[-k:]):
         return False
     last = history[-1 - k:]
     return (min(last) > UNMOVED_FAR * opts.aul.tol
