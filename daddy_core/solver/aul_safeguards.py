@@ -18,6 +18,7 @@ import numpy as np
 from ..errors import DaddyError
 from . import newton
 from .deadline import Deadline
+from .cost_scale import scale as cost_scale
 from .lagrangian import Multipliers, plain_cost
 from .options import Globalization, SolverOptions
 from .results import Status, not_halved
@@ -117,10 +118,11 @@ def stalled(history: list, capped: int, opts: SolverOptions) -> bool:
 
 def penalty_dominates(st: Stages) -> bool:
     """The Lagrangian terms of the nominal's augmented cost (J~ - J: the multipliers' and the
-    penalty's) exceed the cost itself in magnitude: a DDP solve of it minimises the violation
-    more than the cost."""
+    penalty's) exceed the cost itself, measured as the relative tests measure it (``cost_scale``:
+    a constant in the cost changes nothing): a DDP solve of it minimises the violation more
+    than the cost."""
     plain = plain_cost(st.problem, st.X, st.U, st.hom)
-    return st.cost - plain > abs(plain)
+    return st.cost - plain > cost_scale(plain, st.anchor)
 
 
 def unmoved(history: list, dominated: list, opts: SolverOptions) -> bool:
