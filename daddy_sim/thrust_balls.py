@@ -121,10 +121,10 @@ class ThrustBalls:
         if not S:
             return start
         stages = n // NU
-        P = A                                                      # (rows, k): y = d, k = n
-        G = (np.eye(n) * self.scale).reshape(-1, stages, NU)       # (k, stages, 3) thrust / y
-        GG = np.einsum("kjc,ljc->jkl", G, G).reshape(stages, -1)   # (stages, k * k)
-        k = len(G)
+        s3 = self.scale.reshape(stages, NU)                        # thrust per unit of y = d
+        block = np.arange(n).reshape(stages, NU)                   # each stage's columns
+        rows_, cols_ = block[:, :, None], block[:, None, :]        # its 3 x 3 block of H
+        AtA = A.T @ A
         u0 = self.thrust_of(kept + start)
         r0 = start @ A.T - b                                       # (S, rows) the start's miss
         miss2 = np.einsum("sr,sr->s", r0, r0)
@@ -133,13 +133,13 @@ class ThrustBalls:
         w = 1.0 / np.where(far, miss2, 1.0)[:, None]
         R2 = (np.maximum(rating, np.linalg.norm(u0, axis=2).max(axis=1)) *
               (1 + 1e-6))[:, None] ** 2                            # (S, 1) a strict interior
-        y = np.zeros((S, k))
+        y = np.zeros((S, n))
 
         def thrust(i, y):
-            return u0[i] + (y @ G.reshape(k, -1)).reshape(len(i), stages, NU)
+            return u0[i] + y.reshape(len(i), stages, NU) * s3
 
         def merit(i, y, t):
-            r = r0[i] + y @ P.T
+            r = r0[i] + y @ A.T
             slack = R2[i] - np.sum(thrust(i, y) ** 2, axis=2)
             with np.errstate(invalid="ignore", divide="ignore"):
                 barrier = -np.log(slack).sum(axis=1)
@@ -156,17 +156,20 @@ class ThrustBalls:
                 i, yi = todo, y[todo]
                 u = thrust(i, yi)                                 # (s, stages, 3)
                 inv = 1.0 / (R2[i] - np.sum(u * u, axis=2))       # (s, stages) 1 / slack
-                Gu = np.einsum("kjc,sjc->sjk", G, u)              # (s, stages, k)
+                si = s3 * u * inv[:, :, None]                     # d|u|^2/2 / dy / slack
                 tw = t * w[i]
-                grad = tw * ((r0[i] + yi @ P.T) @ P) + 2 * np.einsum("sjk,sj->sk", Gu, inv)
-                Gi = Gu * inv[:, :, None]
-                H = tw[:, :, None] * (P.T @ P) + 2 * (inv @ GG).reshape(-1, k, k) + \
-                    4 * Gi.transpose(0, 2, 1) @ Gi
-                H += 1e-12 * np.trace(H, axis1=1, axis2=2)[:, None, None] * np.eye(k)
+                grad = tw * ((r0[i] + yi @ A.T) @ A) + 2 * si.reshape(len(i), n)
+                # the barrier's Hessian: 2 s^2 / slack on the diagonal, 4 (s u / slack) outer
+                # itself in each stage's block
+                barrier = np.zeros((len(i), n, n))
+                barrier[:, block, block] = 2 * (inv[:, :, None] * (s3 * s3))
+                H = tw[:, :, None] * AtA + barrier
+                H[:, rows_, cols_] += 4 * (si[:, :, :, None] * si[:, :, None, :])
+                H += 1e-12 * np.trace(H, axis1=1, axis2=2)[:, None, None] * np.eye(n)
                 step = -np.linalg.solve(H, grad[:, :, None])[:, :, 0]
                 decrement = -np.einsum("sk,sk->s", grad, step)
                 # the longest step inside every ball (|u + a du|^2 = R^2), 1 at most
-                du = (step @ G.reshape(k, -1)).reshape(len(i), stages, NU)
+                du = step.reshape(len(i), stages, NU) * s3
                 qa, qb = np.sum(du * du, axis=2), np.sum(u * du, axis=2)
                 room = (-qb + np.sqrt(qb * qb + qa / inv)) / np.maximum(qa, 1e-300)
                 alpha = np.minimum(1.0, 0.99 * room.min(axis=1))
