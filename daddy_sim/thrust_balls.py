@@ -122,8 +122,6 @@ class ThrustBalls:
             return start
         stages = n // NU
         s3 = self.scale.reshape(stages, NU)                        # thrust per unit of y = d
-        block = np.arange(n).reshape(stages, NU)                   # each stage's columns
-        rows_, cols_ = block[:, :, None], block[:, None, :]        # its 3 x 3 block of H
         AtA = A.T @ A
         u0 = self.thrust_of(kept + start)
         r0 = start @ A.T - b                                       # (S, rows) the start's miss
@@ -161,11 +159,14 @@ class ThrustBalls:
                 grad = tw * ((r0[i] + yi @ A.T) @ A) + 2 * si.reshape(len(i), n)
                 # the barrier's Hessian: 2 s^2 / slack on the diagonal, 4 (s u / slack) outer
                 # itself in each stage's block
-                barrier = np.zeros((len(i), n, n))
-                barrier[:, block, block] = 2 * (inv[:, :, None] * (s3 * s3))
-                H = tw[:, :, None] * AtA + barrier
-                H[:, rows_, cols_] += 4 * (si[:, :, :, None] * si[:, :, None, :])
-                H += 1e-12 * np.trace(H, axis1=1, axis2=2)[:, None, None] * np.eye(n)
+                H = tw[:, :, None] * AtA
+                diagonal = H.reshape(len(i), -1)[:, ::n + 1]      # a view of each diagonal
+                diagonal += (2 * (inv[:, :, None] * (s3 * s3))).reshape(len(i), n)
+                blocks = H.reshape(len(i), stages, NU, stages, NU)
+                outer = 4 * (si[:, :, :, None] * si[:, :, None, :])
+                for j in range(stages):
+                    blocks[:, j, :, j, :] += outer[:, j]
+                diagonal += 1e-12 * np.trace(H, axis1=1, axis2=2)[:, None]
                 step = -np.linalg.solve(H, grad[:, :, None])[:, :, 0]
                 decrement = -np.einsum("sk,sk->s", grad, step)
                 # the longest step inside every ball (|u + a du|^2 = R^2), 1 at most
