@@ -27,7 +27,8 @@ rules decide which rung's is flown, if any (``_Targeting._ladder``). The
 projection and the rating are why the terminal dispersion is not a Gaussian of the errors
 and is sampled (``samples`` draws of every error), not propagated as a covariance. Drift
 re-plans are not modelled: to first order a re-plan and the next law null the same predicted
-error. A stage without a law re-plans like an arrival estimate.
+error (but in the node they leave the arrival phase starting on a higher rung of the ladder:
+docs/policies.md). A stage without a law re-plans like an arrival estimate.
 """
 from __future__ import annotations
 
