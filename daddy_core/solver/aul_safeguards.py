@@ -19,7 +19,8 @@ from ..errors import DaddyError
 from . import newton
 from .deadline import Deadline
 from .cost_scale import scale as cost_scale
-from .lagrangian import Multipliers, plain_cost
+from .lagrangian import Multipliers
+from .optimality import objective
 from .options import Globalization, SolverOptions
 from .results import Status, not_halved
 from .sweeps import Stages
@@ -121,7 +122,7 @@ def penalty_dominates(st: Stages) -> bool:
     penalty's) exceed the cost itself, measured as the relative tests measure it (``cost_scale``:
     a constant in the cost changes nothing): a DDP solve of it minimises the violation more
     than the cost."""
-    plain = plain_cost(st.problem, st.X, st.U, st.hom)
+    plain = objective(st.problem, st.X, st.U, st.hom)
     return st.cost - plain > cost_scale(plain, st.anchor)
 
 

@@ -108,9 +108,3 @@ def augmented_cost(problem: Problem, X, U, mult: Multipliers, hom) -> float:
     stages, terminal = augmented_cost_terms(problem, X, U, mult, hom)
     return float(np.sum(stages) + terminal)
 
-
-def plain_cost(problem: Problem, X, U, hom) -> float:
-    """The cost J of a trajectory X (N+1, nx), U (N, nu) in floats, without the Lagrangian
-    terms of eq. 8 (J~ - J is what the multipliers and the penalty add)."""
-    stages = problem.stage_cost(X[:-1].T, U.T, problem.stage_dt, hom)
-    return float(np.sum(stages) + problem.terminal_cost(X[-1], problem.x_target))
