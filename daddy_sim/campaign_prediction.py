@@ -260,27 +260,23 @@ class _Targeting:
         than they do (the largest weighted row), else they are kept.
 
         A draw's best effort on the rung it starts from cannot stop its climb (there is none
-        below to compare), so it is computed only once the next rung is out of reach too
-        (``deferred``): most draws a rung cannot serve, the next one can."""
+        below to compare), so it is made only once the next rung is out of reach too: a draw
+        still short past its first rung with no best effort yet gets the rung below's first.
+        Most draws a rung cannot serve, the next one can."""
         S = len(kept)
         change, fits, stopped = np.zeros_like(kept), np.zeros(S, bool), np.zeros(S, bool)
         best, miss = np.zeros_like(kept), np.full(S, np.inf)   # the best effort so far
-        deferred = np.zeros(S, bool)                 # the previous rung's best effort not made
         rung, top = self._rung(kept), len(self.ratings) - 1
         for k, rating in enumerate(self.ratings):
             todo = np.flatnonzero(~fits & ~stopped & (rung <= k))
             step, met = self.balls.least_change(self.M, rows[todo], kept[todo], rating)
             change[todo[met]] = step[met]
             fits[todo[met]] = True
-            deferred[todo[met]] = False
             short = todo[~met]
-            late = short[deferred[short]]
+            late = short[(rung[short] < k) & np.isinf(miss[short])]
             best[late], miss[late] = self._best_effort(rows[late], kept[late],
                                                        float(self.ratings[k - 1]), w)
-            deferred[late] = False
-            first = np.isinf(miss[short]) & (k < top)
-            deferred[short[first]] = True
-            short = short[~first]
+            short = short[~(np.isinf(miss[short]) & (k < top))]   # (their first rung: later)
             d, m = self._best_effort(rows[short], kept[short], rating, w)
             better = m < miss[short]
             stopped[short] = better & (m > LADDER_MIN_GAIN * miss[short])
